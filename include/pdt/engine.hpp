@@ -1,0 +1,152 @@
+#pragma once
+// pdt::Engine: many threads carrying out a live stream of insertions and
+// removals on one Triangulation (Foteinos & Chrisochoides, §3).
+//
+// Model. The engine is given the domain box up front; the box is split into
+// blocks_per_axis^3 blocks, each owned by one worker with its own queue, and
+// every operation goes to the worker owning its point's block (a removal: the
+// vertex's point). Workers run as oneTBB tasks in the caller's task_arena (the
+// arena the constructing thread is in, or the one passed): no hidden thread
+// pool. A worker takes per-vertex try-locks (shared while walking, exclusive
+// on a cavity or hole); when a lock is taken it rolls the operation back
+// (nothing was changed), puts it back in its queue and moves on. A contention
+// manager keeps each worker's progress ratio completed/attempted: below
+// contention_low the worker suspends (releasing everything), above
+// contention_high it wakes a sleeper; at least one worker always runs, so the
+// engine cannot livelock. Because ties are broken by symbolic perturbation the
+// final triangulation does not depend on the thread count or the interleaving.
+//
+// Any thread may submit while the engine runs. Results come back three ways:
+//   co_await engine.insert(p)            (C++20 coroutine; resumes as a TBB task)
+//   engine.insert(p, callback)           (callback on a worker thread; keep it short)
+//   engine.drain()                       (waits until every submitted operation is done)
+// While an engine runs, do not call the Triangulation's mutating methods or
+// queries directly; after drain() they see the final state.
+#include <coroutine>
+#include <cstdint>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <oneapi/tbb/task_arena.h>
+
+#include "pdt/ops.hpp"
+#include "pdt/triangulation.hpp"
+
+namespace pdt {
+
+// Every field is mirrored by an environment variable, read by from_environment().
+struct EngineOptions {
+  unsigned threads = 0;             // PDT_THREADS: workers; 0 = the arena's concurrency
+  unsigned blocks_per_axis = 0;     // PDT_BLOCKS_PER_AXIS: 0 = smallest b with b^3 >= 4 * threads
+  double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
+  double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
+  unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
+  std::size_t grid_slots = 1u << 21;  // PDT_GRID_SLOTS: jump-and-walk grid slots over the domain
+
+  // Starts from `defaults` and overrides each field whose variable is set.
+  // Throws pdt::Error(invalid_argument) naming the variable for a bad value.
+  static EngineOptions from_environment(EngineOptions defaults);
+  static EngineOptions from_environment();
+};
+
+// The per-thread pool allocator this build uses for cells and vertices:
+// "pool" (pdt's chunked pool) or "mimalloc" (CMake option PDT_ALLOCATOR).
+const char* allocator_name();
+
+struct WorkerStats {
+  std::uint64_t completed = 0;  // operations done
+  std::uint64_t attempts = 0;   // tries, completed + rolled back + deferred
+  std::uint64_t rollbacks = 0;  // tries that met a lock
+  std::uint64_t deferred = 0;   // removals tried before the insertion they undo was done
+  std::uint64_t sleeps = 0;     // times the contention manager suspended this worker
+  double seconds_asleep = 0;
+  double max_rollbacks_per_completed = 0;  // the paper's "Max #Rollbacks/#compl. ops", per worker
+};
+
+struct EngineStats {
+  std::vector<WorkerStats> workers;
+  std::uint64_t global_operations = 0;  // run with the world stopped (dimension changes)
+  WorkerStats total() const;            // sums; max ratio is the max over workers
+};
+
+// The outcome of one operation.
+struct OpResult {
+  InsertResult insert;                               // for insertions
+  RemoveResult remove = RemoveResult::removed;       // for removals
+  std::exception_ptr error;                          // a pdt::Error if the operation failed
+};
+
+class Engine;
+
+namespace detail {
+struct EngineState;
+struct OpAwaitBase {
+  Engine* engine;
+  OpResult result;
+  std::coroutine_handle<> waiter;
+};
+}  // namespace detail
+
+class [[nodiscard]] InsertAwaitable : detail::OpAwaitBase {
+ public:
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h);  // false: failed at once, await_resume throws
+  InsertResult await_resume();  // rethrows the operation's error
+
+ private:
+  friend class Engine;
+  Point3 point_;
+};
+
+class [[nodiscard]] RemoveAwaitable : detail::OpAwaitBase {
+ public:
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h);
+  RemoveResult await_resume();  // rethrows the operation's error
+
+ private:
+  friend class Engine;
+  VertexId vertex_ = no_vertex;
+};
+
+class Engine {
+ public:
+  using Callback = std::function<void(const OpResult&)>;
+  using Ticket = std::uint64_t;  // numbers the insertions submitted to this engine, from 0
+
+  // The triangulation must outlive the engine; points outside `domain` are
+  // refused. arena: where workers run; null = the caller's current arena.
+  Engine(Triangulation& t, const Box& domain, EngineOptions options = EngineOptions::from_environment(),
+         tbb::task_arena* arena = nullptr);
+  ~Engine();  // drains
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
+
+  // Awaitable forms. Errors (NaN, outside the domain) are thrown by co_await.
+  InsertAwaitable insert(const Point3& p);
+  RemoveAwaitable remove(VertexId v);
+  // Callback forms (callback may be empty). insert() throws pdt::Error at once
+  // for a NaN/Inf point or one outside the domain, and submits nothing.
+  Ticket insert(const Point3& p, Callback done);
+  void remove(VertexId v, Callback done);
+  // Undoes insertion `t` of this engine; it waits for that insertion to finish
+  // first, so a stream can be replayed without barriers. Throws at once for a
+  // ticket never issued or already undone.
+  void remove_insertion(Ticket t, Callback done = {});
+
+  void drain();  // returns when every operation submitted before the call is done
+  EngineStats stats() const;
+  unsigned threads() const;
+  unsigned blocks_per_axis() const;
+  const EngineOptions& options() const;
+
+ private:
+  friend class InsertAwaitable;
+  friend class RemoveAwaitable;
+  std::unique_ptr<detail::EngineState> state_;
+};
+
+}  // namespace pdt

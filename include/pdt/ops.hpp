@@ -1,0 +1,60 @@
+#pragma once
+// Operation streams: the sequence of insertions and removals a refiner makes.
+//
+// Text form (.ops), one item per line:
+//   # comment                      (also blank lines)
+//   box x0 y0 z0 x1 y1 z1          optional, at most once, before any i/r line: the domain
+//   i x y z                        insert a point; the k-th 'i' line (from 0) is insertion k
+//   r k                            undo insertion k (k < number of 'i' lines before it)
+// Coordinates are parsed exactly (strtod); write them with 17 significant digits
+// (as write_ops does) and they round-trip bit for bit.
+//
+// Binary form (.opsb), little-endian: magic "PDTOPS1\0", u8 has_box, 6 x f64 box,
+// u64 count, then per operation: u8 kind (0 insert, 1 remove) followed by 3 x f64
+// (insert) or u64 k (remove).
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "pdt/point.hpp"
+
+namespace pdt {
+
+struct Box {
+  Point3 lo, hi;
+  bool contains(const Point3& p) const {
+    return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
+  }
+};
+
+struct Operation {
+  enum class Kind : std::uint8_t { insert, remove } kind = Kind::insert;
+  Point3 point;              // insert: the point
+  std::uint64_t target = 0;  // remove: the insertion index undone
+};
+
+struct OpStream {
+  std::optional<Box> box;
+  std::vector<Operation> ops;
+  std::size_t insert_count() const;
+  std::size_t remove_count() const;
+};
+
+// Reads a stream; the format is chosen by content (binary magic) not by name
+// (either form may also be gzip-compressed). Throws pdt::Error(bad_format)
+// naming file and line (binary: operation index) for a malformed stream:
+// unknown verb, missing or extra field, NaN/Inf or out-of-range number, box
+// after operations or twice, a box with lo > hi, an inserted point outside the
+// box, 'r k' naming an insertion that does not exist yet or was already undone;
+// pdt::Error(io_failure) for a missing or unreadable file. So a stream it
+// returns can be replayed without further checks.
+OpStream read_ops(const std::string& path);
+// Writes text (or binary when path ends with ".opsb"). Writes to a temporary
+// file and renames, so a failure (disk full) leaves no partial file behind;
+// throws pdt::Error(io_failure) with the path and the reason. A stream that
+// read_ops would reject (non-finite point, point outside the box, bad 'r k')
+// is refused with pdt::Error(invalid_argument) before anything is written.
+void write_ops(const std::string& path, const OpStream& stream);
+
+}  // namespace pdt

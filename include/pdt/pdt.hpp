@@ -1,0 +1,8 @@
+#pragma once
+// pdt: dynamic, parallel 3D Delaunay triangulation. Umbrella header.
+#include "pdt/error.hpp"
+#include "pdt/generate.hpp"
+#include "pdt/io.hpp"
+#include "pdt/ops.hpp"
+#include "pdt/point.hpp"
+#include "pdt/triangulation.hpp"

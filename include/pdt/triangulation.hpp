@@ -1,0 +1,139 @@
+#pragma once
+// pdt::Triangulation: a dynamic 3D Delaunay triangulation with exact, robust
+// insertion and removal.
+//
+// What it computes. After any sequence of insert() and remove() calls the
+// triangulation is *the* Delaunay triangulation of the points currently in it,
+// ties among cospherical points being broken by the symbolic perturbation of
+// Devillers & Teillaud (points ordered lexicographically by (x, y, z)), the
+// rule CGAL's Delaunay_triangulation_3 uses. That triangulation is unique for
+// any point set that is not entirely coplanar, so the result depends neither on
+// the order of operations nor on the thread count, and equals CGAL's
+// tetrahedron for tetrahedron. The convex hull is exact: the unbounded outside
+// is covered by "infinite" cells sharing the infinite vertex (id 0), never by a
+// bounding box.
+//
+// Lower dimensions. While all points are coplanar (fewer than 4 points, or a
+// start with many coplanar or collinear points) there is no tetrahedron: the
+// vertices are kept and dimension() tells how many dimensions they span; the
+// first point off their plane builds the 3D triangulation. Removals that make
+// the set coplanar again drop back to that state.
+//
+// Duplicates. Inserting a point equal to an existing vertex returns that vertex
+// and raises its multiplicity; remove() lowers it, and the vertex disappears
+// when the multiplicity reaches 0. So the triangulation is always that of the
+// distinct points whose insertions have not all been undone.
+//
+// Ids. A VertexId stays valid until its vertex disappears; the id may then be
+// reused by a later insertion. Storage grows without moving ids.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pdt/point.hpp"
+
+namespace pdt {
+
+using VertexId = std::uint32_t;
+using CellId = std::uint32_t;
+
+inline constexpr VertexId infinite_vertex = 0;
+inline constexpr VertexId no_vertex = 0xFFFFFFFFu;
+inline constexpr CellId no_cell = 0xFFFFFFFFu;
+
+struct InsertResult {
+  VertexId vertex = no_vertex;  // the new vertex, or the existing one equal to the point
+  bool inserted = false;        // false: the point was a duplicate, multiplicity raised
+};
+
+enum class RemoveResult {
+  removed,              // the vertex is gone
+  multiplicity_lowered  // the point had been inserted more than once; the vertex stays
+};
+
+// Where a point lies relative to the triangulation.
+enum class LocateKind { none /*dimension < 3*/, in_cell, on_facet, on_edge, on_vertex, outside_hull };
+
+struct LocateResult {
+  LocateKind kind = LocateKind::none;
+  CellId cell = no_cell;        // a cell containing the point (an infinite cell if outside)
+  VertexId vertex = no_vertex;  // for on_vertex: the vertex at the point
+};
+
+// A hint for location: a vertex or cell near the point, as a refiner usually knows.
+struct Hint {
+  VertexId vertex = no_vertex;
+  CellId cell = no_cell;
+};
+
+struct TriangulationStats {
+  std::uint64_t insertions = 0;        // successful insert() calls, duplicates included
+  std::uint64_t duplicates = 0;        // insert() calls that found an existing vertex
+  std::uint64_t removals = 0;          // remove() calls
+  std::uint64_t cells_created_by_insert = 0;
+  std::uint64_t cells_created_by_remove = 0;  // cells sewn into holes
+  std::uint64_t cells_touched_by_remove = 0;  // hole cells + small-triangulation cells built
+  std::uint64_t walk_steps = 0;        // visibility-walk steps over all locations
+};
+
+class Triangulation {
+ public:
+  Triangulation();
+  ~Triangulation();
+  Triangulation(Triangulation&&) noexcept;
+  Triangulation& operator=(Triangulation&&) noexcept;
+  Triangulation(const Triangulation&) = delete;
+  Triangulation& operator=(const Triangulation&) = delete;
+
+  // Inserts p. Throws pdt::Error(non_finite_coordinate) for NaN/Inf and changes nothing.
+  InsertResult insert(const Point3& p, Hint hint = {});
+  // Undoes one insertion of v. Throws pdt::Error(unknown_vertex) for the infinite
+  // vertex, an id never issued or a vertex already gone, and changes nothing.
+  RemoveResult remove(VertexId v);
+  void clear();
+
+  // -- queries ---------------------------------------------------------------
+  int dimension() const;                         // -1 empty, 0..3
+  std::size_t number_of_vertices() const;        // distinct finite vertices
+  std::size_t number_of_finite_cells() const;    // tetrahedra (0 while dimension < 3)
+  std::size_t number_of_cells() const;           // finite + infinite
+  bool is_vertex(VertexId v) const;              // a live finite vertex
+  Point3 point(VertexId v) const;                // precondition: is_vertex(v)
+  std::uint32_t multiplicity(VertexId v) const;  // 0 if not a vertex
+  LocateResult locate(const Point3& p, Hint hint = {}) const;
+  VertexId nearest_vertex(const Point3& p) const;  // no_vertex if empty
+  // Finite tetrahedra as vertex ids, positively oriented.
+  std::vector<std::array<VertexId, 4>> finite_cells() const;
+  // Live finite vertex ids, increasing.
+  std::vector<VertexId> vertices() const;
+  // Raw access for iteration without copies: ids below cell_id_bound() may be
+  // live or free; is_cell() tells. A cell's facet i is opposite vertex i;
+  // neighbor(c, i) shares that facet.
+  CellId cell_id_bound() const;
+  bool is_cell(CellId c) const;
+  bool is_finite_cell(CellId c) const;
+  VertexId cell_vertex(CellId c, int i) const;
+  CellId cell_neighbor(CellId c, int i) const;
+  VertexId vertex_id_bound() const;
+
+  // Checks every invariant of the structure (see lib/triangulation_impl.hpp)
+  // and the local Delaunay property of every facet with exact predicates.
+  // Returns true when all hold; otherwise false and, if why is given, what failed.
+  bool validate(std::string* why = nullptr) const;
+
+  const TriangulationStats& stats() const;
+  std::size_t memory_bytes() const;  // bytes held by cell and vertex storage
+
+  // Implementation access for pdt's own engine and tests (lib/triangulation_impl.hpp).
+  struct Impl;
+  Impl& impl() { return *impl_; }
+  const Impl& impl() const { return *impl_; }
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace pdt

@@ -1,0 +1,663 @@
+// pdt::Engine: block-owned workers on oneTBB, try-locks with rollback, and
+// the contention manager of Foteinos & Chrisochoides §3.
+//
+// Phases of a worker (a C++20 coroutine run as TBB tasks):
+//   idle      its queue was empty; suspended. A submission to its queue
+//             resumes it as a new task.
+//   running   pops operations and runs them; a rollback re-queues the
+//             operation at the back of its own queue.
+//   sleeping  suspended by the contention manager (progress ratio below u-);
+//             woken by a worker whose ratio is above u+, or by any worker
+//             going idle, or by drain().
+// Invariant: `active` counts running workers; a worker never goes to sleep
+// when it is the last one running, so some worker always makes progress.
+//
+// Operations that change the dimension (the first points, a removal that
+// leaves a coplanar set) cannot run under vertex locks: they run with the
+// world stopped. The worker that needs it takes `global_mutex`, raises
+// `world_stop` and waits until no other worker is inside an operation.
+#include "pdt/engine.hpp"
+
+#include <oneapi/tbb/concurrent_queue.h>
+#include <oneapi/tbb/concurrent_vector.h>
+#include <oneapi/tbb/task_group.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "pdt/error.hpp"
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+namespace detail {
+
+enum class OpKind : std::uint8_t { insert, remove, remove_insertion };
+
+struct QueuedOp {
+  OpKind kind = OpKind::insert;
+  Point3 point;                 // insert: the point; removals: where the vertex is (routing)
+  VertexId vertex = no_vertex;  // remove
+  std::uint64_t stamp = 0;      // remove: the vertex incarnation expected (0 = any)
+  std::uint64_t ticket = 0;     // insert: its own ticket; remove_insertion: the insertion undone
+  Engine::Callback done;
+  OpAwaitBase* awaiter = nullptr;
+};
+
+struct TicketSlot {
+  std::atomic<int> state{0};  // 0 pending, 1 inserted, 2 failed
+  std::atomic<bool> undone{false};
+  VertexId vertex = no_vertex;  // written before state becomes 1
+  std::uint64_t stamp = 0;
+  Point3 point;
+};
+
+// A worker's body: a coroutine that never returns; destroyed while suspended.
+struct WorkerCoroutine {
+  struct promise_type {
+    WorkerCoroutine get_return_object() {
+      return {std::coroutine_handle<promise_type>::from_promise(*this)};
+    }
+    std::suspend_always initial_suspend() noexcept { return {}; }
+    std::suspend_always final_suspend() noexcept { return {}; }
+    void return_void() {}
+    void unhandled_exception() { std::terminate(); }  // operations catch their own errors
+  };
+  std::coroutine_handle<promise_type> handle;
+};
+
+enum WorkerPhase : int { idle = 0, running = 1, sleeping = 2 };
+
+struct alignas(64) Worker {
+  unsigned index = 0;
+  std::unique_ptr<OpContext> ctx;
+  tbb::concurrent_queue<QueuedOp> queue;
+  std::atomic<int> phase{idle};
+  std::atomic<bool> in_op{false};
+  std::coroutine_handle<> handle;
+  // Contention manager window (owned by the worker's running task).
+  std::uint32_t window_attempts = 0, window_completed = 0;
+  std::chrono::steady_clock::time_point slept_at;
+  // Statistics: written by the worker, read by stats() (relaxed).
+  std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0};
+  std::atomic<double> seconds_asleep{0};
+};
+
+struct EngineState {
+  EngineState(Triangulation& t, const Box& d, EngineOptions o, tbb::task_arena* a);
+
+  Triangulation& tri;
+  Triangulation::Impl& impl;
+  Box domain;
+  EngineOptions opts;
+  tbb::task_arena attached;  // the caller's arena when none is passed
+  tbb::task_arena* arena;
+  tbb::task_group tasks;
+  unsigned nthreads = 1, blocks = 1;
+  std::vector<std::unique_ptr<Worker>> workers;
+  std::vector<WorkerCoroutine> bodies;
+  std::atomic<std::int64_t> pending{0};
+  tbb::concurrent_vector<TicketSlot> tickets;
+  std::mutex sleep_mutex;
+  std::vector<Worker*> sleepers;
+  std::atomic<int> active{0};
+  std::mutex global_mutex;
+  std::atomic<bool> world_stop{false};
+  std::atomic<std::uint64_t> global_ops{0};
+
+  template <class F>
+  void spawn(F&& f) {
+    arena->execute([&] { tasks.run(std::forward<F>(f)); });
+  }
+  Worker& owner_of(const Point3& p);
+  void submit(QueuedOp&& op);
+  void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
+  bool wake_one();
+  void execute(Worker& w, QueuedOp& op);
+  void run_global(Worker& w, QueuedOp& op);
+  void complete(Worker& w, QueuedOp& op, OpResult& r, std::uint64_t stamp);
+  void judge(Worker& w, bool* want_sleep);
+  void ensure_grid();
+  WorkerCoroutine body(Worker& w);
+  void check_point(const Point3& p) const;
+};
+
+// -- awaiters of the worker coroutine ------------------------------------------
+struct IdleAwait {
+  EngineState* e;
+  Worker* w;
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h) {
+    // Once `phase` says idle, a submitter may resume us on another thread:
+    // from then on touch only locals (not this awaiter, which lives in the frame).
+    EngineState* es = e;
+    Worker* wk = w;
+    wk->handle = h;
+    wk->phase.store(idle, std::memory_order_seq_cst);
+    es->active.fetch_sub(1, std::memory_order_seq_cst);
+    es->wake_one();  // an idle worker competes with nobody: let a sleeper run
+    if (!wk->queue.empty()) {
+      int expect = idle;
+      if (wk->phase.compare_exchange_strong(expect, running)) {
+        es->active.fetch_add(1);
+        return false;  // work arrived meanwhile: go on
+      }
+    }
+    return true;
+  }
+  void await_resume() const noexcept {}
+};
+
+struct SleepAwait {
+  EngineState* e;
+  Worker* w;
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h) {
+    EngineState* es = e;
+    Worker* wk = w;
+    std::lock_guard lock(es->sleep_mutex);
+    if (es->active.load() <= 1) return false;  // the last running worker never sleeps
+    wk->handle = h;
+    wk->slept_at = std::chrono::steady_clock::now();
+    wk->sleeps.fetch_add(1, std::memory_order_relaxed);
+    wk->phase.store(sleeping);
+    es->active.fetch_sub(1);
+    es->sleepers.push_back(wk);
+    return true;
+  }
+  void await_resume() const noexcept {}
+};
+
+WorkerCoroutine EngineState::body(Worker& w) {
+  for (;;) {
+    QueuedOp op;
+    while (w.queue.try_pop(op)) {
+      execute(w, op);
+      bool want_sleep = false;
+      judge(w, &want_sleep);
+      if (want_sleep) co_await SleepAwait{this, &w};
+    }
+    co_await IdleAwait{this, &w};
+  }
+}
+
+EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, tbb::task_arena* a)
+    : tri(t), impl(t.impl()), domain(d), opts(o), attached(tbb::task_arena::attach{}), arena(a ? a : &attached) {
+  if (!arena->is_active()) arena->initialize();
+  nthreads = opts.threads ? opts.threads : static_cast<unsigned>(std::max(1, arena->max_concurrency()));
+  blocks = opts.blocks_per_axis;
+  if (!blocks)
+    while (blocks * blocks * blocks < 4 * nthreads) ++blocks;
+  for (unsigned i = 0; i < nthreads; ++i) {
+    auto w = std::make_unique<Worker>();
+    w->index = i;
+    w->ctx = std::make_unique<OpContext>(i + 2, true);  // id 1 is the sequential context
+    workers.push_back(std::move(w));
+  }
+  for (auto& w : workers) {
+    bodies.push_back(body(*w));
+    w->handle = bodies.back().handle;
+  }
+  ensure_grid();
+}
+
+void EngineState::ensure_grid() {
+  if (impl.dim.load() < 3 || impl.grid.slot_count >= opts.grid_slots / 2) return;
+  const double box[6] = {domain.lo.x, domain.lo.y, domain.lo.z, domain.hi.x, domain.hi.y, domain.hi.z};
+  impl.grid_rebuild(box, opts.grid_slots);
+  impl.grid.built_for = std::size_t{1} << 60;  // sized for the domain: no automatic rebuild
+}
+
+Worker& EngineState::owner_of(const Point3& p) {
+  const double c[3] = {p.x, p.y, p.z};
+  const double lo[3] = {domain.lo.x, domain.lo.y, domain.lo.z};
+  const double hi[3] = {domain.hi.x, domain.hi.y, domain.hi.z};
+  std::size_t id = 0;
+  for (int a = 2; a >= 0; --a) {
+    double half_ext = 0.5 * hi[a] - 0.5 * lo[a];  // halves: no overflow
+    double t = half_ext > 0 ? (0.5 * c[a] - 0.5 * lo[a]) / half_ext * blocks : 0.0;
+    int b = t > 0 ? static_cast<int>(std::min(t, static_cast<double>(blocks - 1))) : 0;
+    id = id * blocks + static_cast<std::size_t>(b);
+  }
+  // Contiguous runs of blocks per worker: each worker owns a compact region.
+  std::size_t nblocks = std::size_t{blocks} * blocks * blocks;
+  return *workers[id * nthreads / nblocks];
+}
+
+void EngineState::check_point(const Point3& p) const {
+  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+    std::ostringstream os;
+    os.precision(17);
+    os << "point (" << p.x << ", " << p.y << ", " << p.z
+       << ") has a NaN or infinite coordinate; every coordinate must be a finite double";
+    throw Error(ErrorCode::non_finite_coordinate, os.str());
+  }
+  if (!domain.contains(p)) {
+    std::ostringstream os;
+    os.precision(17);
+    os << "point (" << p.x << ", " << p.y << ", " << p.z << ") is outside the engine's domain [" << domain.lo.x
+       << ", " << domain.hi.x << "] x [" << domain.lo.y << ", " << domain.hi.y << "] x [" << domain.lo.z << ", "
+       << domain.hi.z << "]; declare a box that holds every point the refiner may insert";
+    throw Error(ErrorCode::outside_domain, os.str());
+  }
+}
+
+void EngineState::resume(Worker& w) {
+  active.fetch_add(1);
+  std::coroutine_handle<> h = w.handle;
+  spawn([h] { h.resume(); });
+}
+
+void EngineState::submit(QueuedOp&& op) {
+  pending.fetch_add(1, std::memory_order_relaxed);
+  Worker& w = owner_of(op.point);
+  w.queue.push(std::move(op));
+  int expect = idle;
+  if (w.phase.compare_exchange_strong(expect, running)) {
+    resume(w);
+  } else if (expect == sleeping && active.load() == 0) {
+    // Nobody runs to wake it: do it here.
+    std::lock_guard lock(sleep_mutex);
+    auto it = std::find(sleepers.begin(), sleepers.end(), &w);
+    if (it != sleepers.end()) {
+      sleepers.erase(it);
+      w.seconds_asleep.store(w.seconds_asleep.load() +
+                             std::chrono::duration<double>(std::chrono::steady_clock::now() - w.slept_at).count());
+      w.window_attempts = w.window_completed = 0;
+      w.phase.store(running);
+      resume(w);
+    }
+  }
+}
+
+bool EngineState::wake_one() {
+  Worker* w = nullptr;
+  {
+    std::lock_guard lock(sleep_mutex);
+    if (sleepers.empty()) return false;
+    w = sleepers.back();
+    sleepers.pop_back();
+    w->seconds_asleep.store(w->seconds_asleep.load() +
+                            std::chrono::duration<double>(std::chrono::steady_clock::now() - w->slept_at).count());
+    w->window_attempts = w->window_completed = 0;  // the manager is memoryless (§3.3)
+    w->phase.store(running);
+  }
+  resume(*w);
+  return true;
+}
+
+void EngineState::judge(Worker& w, bool* want_sleep) {
+  if (w.window_attempts < opts.contention_window) return;
+  double u = static_cast<double>(w.window_completed) / w.window_attempts;
+  w.window_attempts = w.window_completed = 0;
+  if (u < opts.contention_low)
+    *want_sleep = true;
+  else if (u > opts.contention_high)
+    wake_one();
+}
+
+void EngineState::execute(Worker& w, QueuedOp& op) {
+  // Enter an operation unless the world is stopped (see run_global).
+  w.in_op.store(true, std::memory_order_seq_cst);
+  while (world_stop.load(std::memory_order_seq_cst)) {
+    w.in_op.store(false, std::memory_order_seq_cst);
+    while (world_stop.load(std::memory_order_acquire)) std::this_thread::yield();
+    w.in_op.store(true, std::memory_order_seq_cst);
+  }
+  OpContext& ctx = *w.ctx;
+  w.attempts.fetch_add(1, std::memory_order_relaxed);
+  ++w.window_attempts;
+  OpResult r;
+  OpStatus s = OpStatus::done;
+  std::uint64_t stamp = 0;
+  try {
+    switch (op.kind) {
+      case OpKind::insert: {
+        const Point3& p = op.point;
+        s = impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
+        if (s == OpStatus::done) stamp = ctx.result_stamp;
+        break;
+      }
+      case OpKind::remove:
+        s = impl.remove(ctx, op.vertex, op.stamp, r.remove);
+        break;
+      case OpKind::remove_insertion: {
+        TicketSlot& slot = tickets[op.ticket];
+        int st = slot.state.load(std::memory_order_acquire);
+        if (st == 0) {  // the insertion it undoes is not done yet
+          w.in_op.store(false, std::memory_order_release);
+          w.deferred.fetch_add(1, std::memory_order_relaxed);
+          w.queue.push(std::move(op));
+          return;
+        }
+        if (st == 2) throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(op.ticket) +
+                                                                ": that insertion failed");
+        s = impl.remove(ctx, slot.vertex, slot.stamp, r.remove);
+        break;
+      }
+    }
+  } catch (...) {
+    impl.release_all(ctx);
+    r.error = std::current_exception();
+    s = OpStatus::done;
+  }
+  w.in_op.store(false, std::memory_order_seq_cst);
+  if (s == OpStatus::rollback) {
+    w.rollbacks.fetch_add(1, std::memory_order_relaxed);
+    w.queue.push(std::move(op));
+    return;
+  }
+  if (s == OpStatus::needs_global) {
+    run_global(w, op);
+    return;
+  }
+  ++w.window_completed;
+  complete(w, op, r, stamp);
+}
+
+void EngineState::run_global(Worker& w, QueuedOp& op) {
+  std::unique_lock lock(global_mutex, std::try_to_lock);
+  if (!lock.owns_lock()) {  // another worker is stopping the world: retry later
+    w.rollbacks.fetch_add(1, std::memory_order_relaxed);
+    w.queue.push(std::move(op));
+    return;
+  }
+  world_stop.store(true, std::memory_order_seq_cst);
+  for (auto& other : workers)
+    if (other.get() != &w)
+      while (other->in_op.load(std::memory_order_seq_cst)) std::this_thread::yield();
+  // Nobody else is inside an operation: run it single-threaded.
+  OpContext& ctx = *impl.seq;
+  OpResult r;
+  std::uint64_t stamp = 0;
+  try {
+    if (op.kind == OpKind::insert) {
+      const Point3& p = op.point;
+      impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
+      stamp = ctx.result_stamp;
+    } else {
+      VertexId v = op.vertex;
+      std::uint64_t expect = op.stamp;
+      if (op.kind == OpKind::remove_insertion) v = tickets[op.ticket].vertex, expect = tickets[op.ticket].stamp;
+      impl.remove(ctx, v, expect, r.remove);
+    }
+  } catch (...) {
+    r.error = std::current_exception();
+  }
+  ensure_grid();
+  global_ops.fetch_add(1, std::memory_order_relaxed);
+  world_stop.store(false, std::memory_order_seq_cst);
+  lock.unlock();
+  ++w.window_completed;
+  complete(w, op, r, stamp);
+}
+
+void EngineState::complete(Worker& w, QueuedOp& op, OpResult& r, std::uint64_t stamp) {
+  if (op.kind == OpKind::insert) {
+    TicketSlot& slot = tickets[op.ticket];
+    if (r.error) {
+      slot.state.store(2, std::memory_order_release);
+    } else {
+      slot.vertex = r.insert.vertex;
+      slot.stamp = stamp;
+      slot.state.store(1, std::memory_order_release);
+    }
+  }
+  w.completed.fetch_add(1, std::memory_order_relaxed);
+  if (op.done) op.done(r);
+  if (op.awaiter) {
+    OpAwaitBase* a = op.awaiter;
+    a->result = std::move(r);
+    std::coroutine_handle<> h = a->waiter;  // `a` may be gone once h resumes
+    spawn([h] { h.resume(); });
+  }
+  pending.fetch_sub(1, std::memory_order_acq_rel);
+}
+
+}  // namespace detail
+
+using detail::EngineState;
+using detail::OpKind;
+using detail::QueuedOp;
+
+// ---------------------------------------------------------------------------
+// Options
+// ---------------------------------------------------------------------------
+namespace {
+
+template <class T>
+void env_number(const char* name, T& field) {
+  const char* s = std::getenv(name);
+  if (!s || !*s) return;
+  char* end = nullptr;
+  double v = std::strtod(s, &end);
+  bool ok = end && *end == '\0' && std::isfinite(v) && v >= 0;
+  if constexpr (std::is_integral_v<T>) ok = ok && v == std::floor(v) && v <= 1e12;
+  if (!ok)
+    throw Error(ErrorCode::invalid_argument,
+                std::string(name) + "='" + s + "' is not a valid value (expected a non-negative number)");
+  field = static_cast<T>(v);
+}
+
+}  // namespace
+
+EngineOptions EngineOptions::from_environment(EngineOptions o) {
+  env_number("PDT_THREADS", o.threads);
+  env_number("PDT_BLOCKS_PER_AXIS", o.blocks_per_axis);
+  env_number("PDT_CONTENTION_LOW", o.contention_low);
+  env_number("PDT_CONTENTION_HIGH", o.contention_high);
+  env_number("PDT_CONTENTION_WINDOW", o.contention_window);
+  env_number("PDT_GRID_SLOTS", o.grid_slots);
+  return o;
+}
+
+EngineOptions EngineOptions::from_environment() { return from_environment(EngineOptions{}); }
+
+const char* allocator_name() {
+#ifdef PDT_USE_MIMALLOC
+  return "mimalloc";
+#else
+  return "pool";
+#endif
+}
+
+WorkerStats EngineStats::total() const {
+  WorkerStats t;
+  for (const WorkerStats& w : workers) {
+    t.completed += w.completed;
+    t.attempts += w.attempts;
+    t.rollbacks += w.rollbacks;
+    t.deferred += w.deferred;
+    t.sleeps += w.sleeps;
+    t.seconds_asleep += w.seconds_asleep;
+    t.max_rollbacks_per_completed = std::max(t.max_rollbacks_per_completed, w.max_rollbacks_per_completed);
+  }
+  return t;
+}
+
+// ---------------------------------------------------------------------------
+// Engine
+// ---------------------------------------------------------------------------
+Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::task_arena* arena) {
+  auto bad = [](const std::string& what) { throw Error(ErrorCode::invalid_argument, what); };
+  if (!(domain.lo.x <= domain.hi.x && domain.lo.y <= domain.hi.y && domain.lo.z <= domain.hi.z) ||
+      !std::isfinite(domain.lo.x + domain.lo.y + domain.lo.z + domain.hi.x + domain.hi.y + domain.hi.z))
+    bad("the engine's domain box must be finite with lo <= hi on every axis");
+  if (!(options.contention_low >= 0 && options.contention_low <= options.contention_high &&
+        options.contention_high <= 1))
+    bad("contention thresholds must satisfy 0 <= contention_low <= contention_high <= 1");
+  if (options.threads > 4096) bad("threads must be at most 4096");
+  if (options.blocks_per_axis > 1024) bad("blocks_per_axis must be at most 1024");
+  if (options.contention_window == 0) options.contention_window = 1;
+  state_ = std::make_unique<EngineState>(t, domain, options, arena);
+}
+
+Engine::~Engine() {
+  if (!state_) return;
+  drain();
+  EngineState& e = *state_;
+  for (auto& b : e.bodies) b.handle.destroy();
+  // Give the workers' pools and statistics back to the triangulation.
+  Triangulation::Impl& impl = e.impl;
+  for (auto& w : e.workers) {
+    impl.merge_pools(*impl.seq, *w->ctx);
+    TriangulationStats& into = impl.seq->stats;
+    const TriangulationStats& from = w->ctx->stats;
+    into.insertions += from.insertions;
+    into.duplicates += from.duplicates;
+    into.removals += from.removals;
+    into.cells_created_by_insert += from.cells_created_by_insert;
+    into.cells_created_by_remove += from.cells_created_by_remove;
+    into.cells_touched_by_remove += from.cells_touched_by_remove;
+    into.walk_steps += from.walk_steps;
+  }
+  impl.grid.built_for = static_cast<std::size_t>(impl.n_vertices.load());
+}
+
+InsertAwaitable Engine::insert(const Point3& p) {
+  InsertAwaitable a;
+  a.engine = this;
+  a.point_ = p;
+  return a;
+}
+
+RemoveAwaitable Engine::remove(VertexId v) {
+  RemoveAwaitable a;
+  a.engine = this;
+  a.vertex_ = v;
+  return a;
+}
+
+bool InsertAwaitable::await_suspend(std::coroutine_handle<> h) {
+  waiter = h;
+  EngineState& e = *engine->state_;
+  try {
+    e.check_point(point_);
+  } catch (...) {
+    result.error = std::current_exception();
+    return false;
+  }
+  QueuedOp op;
+  op.kind = OpKind::insert;
+  op.point = point_;
+  op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
+  e.tickets[op.ticket].point = point_;
+  op.awaiter = this;
+  e.submit(std::move(op));  // from here on `this` may already be resumed and gone
+  return true;
+}
+
+InsertResult InsertAwaitable::await_resume() {
+  if (result.error) std::rethrow_exception(result.error);
+  return result.insert;
+}
+
+bool RemoveAwaitable::await_suspend(std::coroutine_handle<> h) {
+  waiter = h;
+  EngineState& e = *engine->state_;
+  const auto& m = e.impl;
+  if (vertex_ == 0 || vertex_ >= m.verts.size() || m.verts[vertex_].multiplicity == 0) {
+    result.error = std::make_exception_ptr(Error(
+        ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(vertex_) + ": it is not in the triangulation"));
+    return false;
+  }
+  QueuedOp op;
+  op.kind = OpKind::remove;
+  op.vertex = vertex_;
+  op.stamp = m.verts[vertex_].stamp;
+  const auto& p = m.verts[vertex_].p;
+  op.point = {p.x(), p.y(), p.z()};
+  op.awaiter = this;
+  e.submit(std::move(op));
+  return true;
+}
+
+RemoveResult RemoveAwaitable::await_resume() {
+  if (result.error) std::rethrow_exception(result.error);
+  return result.remove;
+}
+
+Engine::Ticket Engine::insert(const Point3& p, Callback done) {
+  EngineState& e = *state_;
+  e.check_point(p);
+  QueuedOp op;
+  op.kind = OpKind::insert;
+  op.point = p;
+  op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
+  e.tickets[op.ticket].point = p;
+  op.done = std::move(done);
+  Ticket t = op.ticket;
+  e.submit(std::move(op));
+  return t;
+}
+
+void Engine::remove(VertexId v, Callback done) {
+  EngineState& e = *state_;
+  const auto& m = e.impl;
+  if (v == 0 || v >= m.verts.size() || m.verts[v].multiplicity == 0)
+    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
+  QueuedOp op;
+  op.kind = OpKind::remove;
+  op.vertex = v;
+  op.stamp = m.verts[v].stamp;
+  const auto& p = m.verts[v].p;
+  op.point = {p.x(), p.y(), p.z()};
+  op.done = std::move(done);
+  e.submit(std::move(op));
+}
+
+void Engine::remove_insertion(Ticket t, Callback done) {
+  EngineState& e = *state_;
+  if (t >= e.tickets.size())
+    throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": no such insertion was submitted");
+  if (e.tickets[t].undone.exchange(true))
+    throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": it was already undone");
+  QueuedOp op;
+  op.kind = OpKind::remove_insertion;
+  op.ticket = t;
+  op.point = e.tickets[t].point;
+  op.done = std::move(done);
+  e.submit(std::move(op));
+}
+
+void Engine::drain() {
+  EngineState& e = *state_;
+  while (e.pending.load(std::memory_order_acquire) > 0) {
+    e.arena->execute([&] { e.tasks.wait(); });
+    if (e.pending.load(std::memory_order_acquire) > 0) {
+      // Every task ended with work left: it sits with sleepers. Wake them.
+      if (!e.wake_one()) std::this_thread::yield();
+    }
+  }
+  e.arena->execute([&] { e.tasks.wait(); });  // continuations of awaiting coroutines
+}
+
+EngineStats Engine::stats() const {
+  const EngineState& e = *state_;
+  EngineStats s;
+  for (const auto& w : e.workers) {
+    WorkerStats ws;
+    ws.completed = w->completed.load();
+    ws.attempts = w->attempts.load();
+    ws.rollbacks = w->rollbacks.load();
+    ws.deferred = w->deferred.load();
+    ws.sleeps = w->sleeps.load();
+    ws.seconds_asleep = w->seconds_asleep.load();
+    ws.max_rollbacks_per_completed = ws.completed ? static_cast<double>(ws.rollbacks) / ws.completed : 0;
+    s.workers.push_back(ws);
+  }
+  s.global_operations = e.global_ops.load();
+  return s;
+}
+
+unsigned Engine::threads() const { return state_->nthreads; }
+unsigned Engine::blocks_per_axis() const { return state_->blocks; }
+const EngineOptions& Engine::options() const { return state_->opts; }
+
+}  // namespace pdt

@@ -1,0 +1,352 @@
+// Internal I/O helpers; see io_util.hpp for the contracts.
+#include "io_util.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+
+namespace pdt::detail {
+
+// ---- numbers -------------------------------------------------------------
+
+NumStatus parse_double(std::string_view token, double& out) {
+  const char* first = token.data();
+  const char* last = first + token.size();
+  if (first != last && *first == '+') {
+    ++first;
+    // "+-1" or "+" alone is not a number.
+    if (first == last || *first == '-' || *first == '+') return NumStatus::not_a_number;
+  }
+  if (first == last) return NumStatus::not_a_number;
+  // from_chars is exact (correctly rounded) and ignores the locale, unlike
+  // strtod under a locale with a decimal comma.
+  double v = 0;
+  auto [ptr, ec] = std::from_chars(first, last, v, std::chars_format::general);
+  if (ec == std::errc::result_out_of_range) return NumStatus::out_of_range;
+  if (ec != std::errc() || ptr != last) return NumStatus::not_a_number;
+  if (!std::isfinite(v)) return NumStatus::non_finite;  // "nan", "inf", "infinity"
+  out = v;
+  return NumStatus::ok;
+}
+
+NumStatus parse_u64(std::string_view token, std::uint64_t& out) {
+  if (token.empty() || token[0] < '0' || token[0] > '9') return NumStatus::not_a_number;
+  std::uint64_t v = 0;
+  auto [ptr, ec] = std::from_chars(token.data(), token.data() + token.size(), v, 10);
+  if (ec == std::errc::result_out_of_range) return NumStatus::out_of_range;
+  if (ec != std::errc() || ptr != token.data() + token.size()) return NumStatus::not_a_number;
+  out = v;
+  return NumStatus::ok;
+}
+
+const char* describe(NumStatus s) {
+  switch (s) {
+    case NumStatus::ok: return "is fine";
+    case NumStatus::not_a_number: return "is not a number";
+    case NumStatus::out_of_range: return "is out of the range of a double";
+    case NumStatus::non_finite: return "is not finite (NaN or infinity)";
+  }
+  return "is invalid";
+}
+
+static inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+std::size_t split_fields(std::string_view line, std::string_view* out, std::size_t max) {
+  std::size_t count = 0, i = 0, n = line.size();
+  while (true) {
+    while (i < n && is_blank(line[i])) ++i;
+    if (i == n) break;
+    std::size_t start = i;
+    while (i < n && !is_blank(line[i])) ++i;
+    if (count < max) out[count] = line.substr(start, i - start);
+    ++count;
+  }
+  return count;
+}
+
+std::string_view strip_comment(std::string_view line) {
+  auto p = line.find('#');
+  return p == std::string_view::npos ? line : line.substr(0, p);
+}
+
+std::string quote(std::string_view s) {
+  std::string out = "'";
+  const std::size_t n = std::min<std::size_t>(s.size(), 40);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto c = static_cast<unsigned char>(s[i]);
+    if (c >= 0x20 && c < 0x7F) {
+      out += static_cast<char>(c);
+    } else {
+      static const char hex[] = "0123456789abcdef";
+      out += "\\x";
+      out += hex[c >> 4];
+      out += hex[c & 15];
+    }
+  }
+  if (n < s.size()) out += "...";
+  out += "'";
+  return out;
+}
+
+void append_double(std::string& out, double v) {
+  char buf[40];
+  // Same output as printf("%.17g"), without the locale's decimal point.
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 17);
+  (void)ec;  // 40 characters always suffice for 17 digits, sign and exponent
+  out.append(buf, ptr);
+}
+
+void append_uint(std::string& out, std::uint64_t v) {
+  char buf[24];
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  (void)ec;
+  out.append(buf, ptr);
+}
+
+bool ends_with_nocase(std::string_view s, std::string_view suffix) {
+  if (s.size() < suffix.size()) return false;
+  s = s.substr(s.size() - suffix.size());
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    char a = s[i], b = suffix[i];
+    if (a >= 'A' && a <= 'Z') a = static_cast<char>(a - 'A' + 'a');
+    if (b >= 'A' && b <= 'Z') b = static_cast<char>(b - 'A' + 'a');
+    if (a != b) return false;
+  }
+  return true;
+}
+
+void throw_io_error(const std::string& what, const std::string& path, int err) {
+  throw Error(ErrorCode::io_failure, what + " '" + path + "': " + std::strerror(err));
+}
+
+// ---- InputFile -----------------------------------------------------------
+
+namespace {
+constexpr std::size_t kReadChunk = 1 << 20;
+// A text line longer than this is not a line of any format pdt reads: it is
+// most likely binary data read as text, and growing the buffer without bound
+// would only exhaust memory before reporting it.
+constexpr std::size_t kMaxLine = 1 << 20;
+}  // namespace
+
+InputFile::InputFile(const std::string& path) : path_(path) {
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0) throw_io_error("cannot open", path, errno);
+  if (S_ISDIR(st.st_mode)) throw_io_error("cannot read", path, EISDIR);
+  errno = 0;
+  gzFile gz = gzopen(path.c_str(), "rb");
+  if (gz == nullptr) throw_io_error("cannot open", path, errno ? errno : ENOMEM);
+  gzbuffer(gz, 1 << 17);
+  gz_ = gz;
+  buf_.resize(kReadChunk);
+}
+
+InputFile::~InputFile() {
+  if (gz_ != nullptr) gzclose_r(static_cast<gzFile>(gz_));
+}
+
+bool InputFile::fill() {
+  if (eof_) return false;
+  // Keep the unconsumed tail at the front; grow when the buffer is full of it.
+  if (pos_ > 0) {
+    std::memmove(buf_.data(), buf_.data() + pos_, end_ - pos_);
+    end_ -= pos_;
+    pos_ = 0;
+  }
+  if (end_ == buf_.size()) buf_.resize(buf_.size() * 2);
+  auto gz = static_cast<gzFile>(gz_);
+  errno = 0;
+  int got = gzread(gz, buf_.data() + end_, static_cast<unsigned>(buf_.size() - end_));
+  if (got < 0) {
+    int errnum = 0;
+    const char* msg = gzerror(gz, &errnum);
+    if (errnum == Z_ERRNO) throw_io_error("cannot read", path_, errno ? errno : EIO);
+    throw Error(ErrorCode::bad_format, path_ + ": corrupt compressed data (" + msg + ")");
+  }
+  if (got == 0) {
+    int errnum = 0;
+    const char* msg = gzerror(gz, &errnum);
+    // Z_BUF_ERROR at the end: the gzip stream stopped in the middle.
+    if (errnum == Z_BUF_ERROR)
+      throw Error(ErrorCode::bad_format, path_ + ": truncated compressed data (" + msg + ")");
+    if (errnum == Z_ERRNO) throw_io_error("cannot read", path_, errno ? errno : EIO);
+    if (errnum != Z_OK) throw Error(ErrorCode::bad_format, path_ + ": corrupt compressed data (" + msg + ")");
+    eof_ = true;
+    return false;
+  }
+  end_ += static_cast<std::size_t>(got);
+  return true;
+}
+
+bool InputFile::read_line(std::string_view& line) {
+  std::size_t scanned = pos_;
+  while (true) {
+    const char* base = buf_.data();
+    const void* nl = std::memchr(base + scanned, '\n', end_ - scanned);
+    if (nl != nullptr) {
+      std::size_t e = static_cast<std::size_t>(static_cast<const char*>(nl) - base);
+      std::size_t len = e - pos_;
+      if (len > 0 && base[e - 1] == '\r') --len;
+      line = std::string_view(base + pos_, len);
+      consumed_ += e + 1 - pos_;
+      pos_ = e + 1;
+      ++line_;
+      return true;
+    }
+    std::size_t pending = end_ - pos_;
+    if (pending > kMaxLine) {
+      ++line_;
+      fail("line longer than 1 MiB; this is not a text file of the expected format");
+    }
+    if (!fill()) {
+      if (end_ == pos_) return false;
+      // Last line without a newline.
+      std::size_t len = end_ - pos_;
+      if (buf_[end_ - 1] == '\r') --len;
+      line = std::string_view(buf_.data() + pos_, len);
+      consumed_ += end_ - pos_;
+      pos_ = end_;
+      ++line_;
+      return true;
+    }
+    scanned = pos_ + pending;  // fill() moved the tail to the front
+  }
+}
+
+std::size_t InputFile::read_bytes(void* dst, std::size_t n) {
+  auto out = static_cast<char*>(dst);
+  std::size_t done = 0;
+  while (done < n) {
+    if (pos_ == end_ && !fill()) break;
+    std::size_t take = std::min(n - done, end_ - pos_);
+    std::memcpy(out + done, buf_.data() + pos_, take);
+    pos_ += take;
+    done += take;
+  }
+  consumed_ += done;
+  return done;
+}
+
+std::string_view InputFile::peek(std::size_t n) {
+  while (end_ - pos_ < n && fill()) {
+  }
+  return std::string_view(buf_.data() + pos_, std::min(n, end_ - pos_));
+}
+
+void InputFile::fail(const std::string& what) const { fail_at_line(line_, what); }
+
+void InputFile::fail_at_line(std::uint64_t line, const std::string& what) const {
+  throw Error(ErrorCode::bad_format, path_ + ":" + std::to_string(line) + ": " + what);
+}
+
+// ---- FdWriter ----------------------------------------------------------------
+
+namespace {
+constexpr std::size_t kWriteChunk = 1 << 20;
+}
+
+FdWriter::FdWriter(int fd, std::string name) : fd_(fd), name_(std::move(name)) { buf_.reserve(kWriteChunk); }
+
+void FdWriter::put(std::string_view s) {
+  if (buf_.size() + s.size() > kWriteChunk) {
+    flush();
+    if (s.size() > kWriteChunk) {  // large block: no point copying it through the buffer
+      buf_.assign(s);
+      flush();
+      return;
+    }
+  }
+  buf_.append(s);
+}
+
+void FdWriter::flush() {
+  const char* p = buf_.data();
+  std::size_t left = buf_.size();
+  while (left > 0) {
+    ssize_t w = ::write(fd_, p, left);
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      int err = errno;
+      buf_.clear();
+      throw_io_error("cannot write", name_, err);
+    }
+    if (w == 0) {  // should not happen for regular files; do not loop forever
+      buf_.clear();
+      throw_io_error("cannot write", name_, EIO);
+    }
+    p += w;
+    left -= static_cast<std::size_t>(w);
+  }
+  buf_.clear();
+}
+
+// ---- OutputFile -------------------------------------------------------------
+
+OutputFile::OutputFile(const std::string& path) : path_(path) {
+  // Unique name in the target's directory: pid + per-process counter; O_EXCL
+  // makes a collision with a stale file from another process retry.
+  static std::atomic<unsigned> counter{0};
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    temp_ = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter.fetch_add(1));
+    // 0666 & ~umask, as a plain fopen would create it (mkstemp would give 0600).
+    fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd_ >= 0) break;
+    if (errno != EEXIST) throw_io_error("cannot create", path, errno);
+  }
+  if (fd_ < 0) throw_io_error("cannot create", path, EEXIST);
+  writer_ = new FdWriter(fd_, path);
+}
+
+OutputFile::~OutputFile() {
+  if (!committed_) discard();
+  delete writer_;
+}
+
+void OutputFile::discard() noexcept {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!temp_.empty()) ::unlink(temp_.c_str());
+  temp_.clear();
+}
+
+void OutputFile::finish() {
+  if (finished_) return;
+  try {
+    writer_->flush();
+  } catch (...) {
+    discard();
+    throw;
+  }
+  // close() can report a delayed write error (NFS, quota): check it.
+  int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    int err = errno;
+    discard();
+    throw_io_error("cannot write", path_, err);
+  }
+  finished_ = true;
+}
+
+void OutputFile::commit() {
+  if (committed_) return;
+  finish();
+  if (::rename(temp_.c_str(), path_.c_str()) != 0) {
+    int err = errno;
+    discard();
+    throw_io_error("cannot rename the temporary file onto", path_, err);
+  }
+  temp_.clear();
+  committed_ = true;
+}
+
+}  // namespace pdt::detail

@@ -1,0 +1,142 @@
+#pragma once
+// Internal I/O helpers shared by the readers and writers (ops_io.cpp,
+// mesh_io.cpp, the tool): exact number parsing, a buffered line/byte reader
+// (plain or gzip files alike, through zlib), and a checked writer that goes
+// through a temporary file and a rename so a failed write leaves nothing behind.
+//
+// Errors: every failure is a pdt::Error. Reading: io_failure for a file that
+// cannot be opened or read, bad_format for content. Writing: io_failure whose
+// message names the path and the system's reason (strerror), e.g.
+// "cannot write 'out.ops': No space left on device".
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "pdt/error.hpp"
+
+namespace pdt::detail {
+
+// ---- numbers -------------------------------------------------------------
+
+enum class NumStatus { ok, not_a_number, out_of_range, non_finite };
+
+// Parses the whole token as a decimal double, exactly (correctly rounded, as
+// strtod, but locale independent). A leading '+' is allowed. NaN and infinities
+// are rejected (non_finite); so are values that overflow, and nonzero values
+// that underflow to zero (out_of_range). Subnormals are accepted.
+NumStatus parse_double(std::string_view token, double& out);
+// Parses the whole token as an unsigned decimal integer (no sign, no fraction).
+NumStatus parse_u64(std::string_view token, std::uint64_t& out);
+const char* describe(NumStatus s);  // "is not a number", ...
+
+// Splits a line into blank-separated tokens (space, tab, \r, \v, \f). Stores
+// at most max of them in out and returns how many there are in all (so a
+// caller can tell "too many fields" without storing them).
+std::size_t split_fields(std::string_view line, std::string_view* out, std::size_t max);
+// The part of line before the first '#'.
+std::string_view strip_comment(std::string_view line);
+
+// s in single quotes for an error message: non-printable bytes as \xNN, cut
+// after 40 characters (a binary file read as text must not garble a terminal).
+std::string quote(std::string_view s);
+
+// Appends a double with 17 significant digits ("%.17g", but locale
+// independent): reading it back with parse_double gives the same bits.
+void append_double(std::string& out, double v);
+void append_uint(std::string& out, std::uint64_t v);
+
+// ---- reading ---------------------------------------------------------------
+
+// Buffered sequential reader over a file, transparently gunzipping gzip data
+// (zlib's gzread passes plain files through unchanged). Lines end at '\n'; a
+// trailing '\r' is dropped. Line views stay valid until the next read call.
+class InputFile {
+ public:
+  // Throws io_failure ("cannot open 'path': No such file or directory").
+  explicit InputFile(const std::string& path);
+  ~InputFile();
+  InputFile(const InputFile&) = delete;
+  InputFile& operator=(const InputFile&) = delete;
+
+  // Next line, or false at end of file. Counts lines (see line()).
+  bool read_line(std::string_view& line);
+  // Up to n bytes into dst; returns how many (fewer only at end of file).
+  std::size_t read_bytes(void* dst, std::size_t n);
+  // Up to n bytes from the current position without consuming them.
+  std::string_view peek(std::size_t n);
+
+  const std::string& path() const { return path_; }
+  std::uint64_t line() const { return line_; }  // number of the last line read (1-based)
+  std::uint64_t offset() const { return consumed_; }  // bytes (uncompressed) consumed
+  // "path:line: " + what, as a bad_format error.
+  [[noreturn]] void fail(const std::string& what) const;
+  [[noreturn]] void fail_at_line(std::uint64_t line, const std::string& what) const;
+
+ private:
+  bool fill();  // reads more into the buffer; false when nothing more
+  void* gz_ = nullptr;
+  std::string path_;
+  std::vector<char> buf_;
+  std::size_t pos_ = 0, end_ = 0;
+  bool eof_ = false;
+  std::uint64_t line_ = 0;
+  std::uint64_t consumed_ = 0;
+};
+
+// ---- writing ---------------------------------------------------------------
+
+// Buffered writer on a file descriptor that checks every write(2). The name is
+// what error messages report. It does not own the descriptor.
+class FdWriter {
+ public:
+  FdWriter(int fd, std::string name);
+  FdWriter(const FdWriter&) = delete;
+  FdWriter& operator=(const FdWriter&) = delete;
+  void put(std::string_view s);
+  void put(const void* data, std::size_t n) { put(std::string_view(static_cast<const char*>(data), n)); }
+  // Writes out the buffer; throws io_failure ("cannot write 'name': <strerror>").
+  void flush();
+  const std::string& name() const { return name_; }
+
+ private:
+  int fd_;
+  std::string name_;
+  std::string buf_;
+};
+
+// A file written atomically: the data goes to a temporary file beside the
+// target (same directory, so rename is atomic) and commit() renames it over the
+// target. Until commit() succeeds nothing exists under the target name; if any
+// step fails, or the object is destroyed without commit(), the temporary file
+// is removed. Errors are io_failure naming the target path.
+class OutputFile {
+ public:
+  explicit OutputFile(const std::string& path);
+  ~OutputFile();
+  OutputFile(const OutputFile&) = delete;
+  OutputFile& operator=(const OutputFile&) = delete;
+  FdWriter& out() { return *writer_; }
+  void put(std::string_view s) { writer_->put(s); }
+  // Flushes and closes the temporary file, checked. Idempotent. Lets a writer
+  // of several files (TetGen .node + .ele) finish all before renaming any.
+  void finish();
+  // finish(), then renames onto the target. After this the object is inert.
+  void commit();
+  const std::string& path() const { return path_; }
+
+ private:
+  void discard() noexcept;
+  std::string path_, temp_;
+  int fd_ = -1;
+  FdWriter* writer_ = nullptr;
+  bool finished_ = false, committed_ = false;
+};
+
+[[noreturn]] void throw_io_error(const std::string& what, const std::string& path, int err);
+
+// Lowercase file name suffix tests.
+bool ends_with_nocase(std::string_view s, std::string_view suffix);
+
+}  // namespace pdt::detail

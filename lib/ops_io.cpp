@@ -1,0 +1,317 @@
+// Reading and writing operation streams (.ops text, .opsb binary); the
+// formats are documented in include/pdt/ops.hpp.
+//
+// Both readers enforce the same stream invariants, so whatever read_ops
+// returns can be replayed without further checks:
+//   - at most one box, before any operation, with lo <= hi per axis, finite;
+//   - every coordinate finite; with a box, every inserted point inside it;
+//   - 'r k' only for an insertion k made earlier and not yet undone.
+// write_ops checks the same invariants (invalid_argument otherwise), so it
+// never writes a file read_ops would reject.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "io_util.hpp"
+#include "pdt/error.hpp"
+#include "pdt/ops.hpp"
+
+namespace pdt {
+
+std::size_t OpStream::insert_count() const {
+  std::size_t n = 0;
+  for (const auto& op : ops) n += op.kind == Operation::Kind::insert;
+  return n;
+}
+
+std::size_t OpStream::remove_count() const { return ops.size() - insert_count(); }
+
+namespace {
+
+using detail::InputFile;
+using detail::NumStatus;
+
+constexpr char kMagic[8] = {'P', 'D', 'T', 'O', 'P', 'S', '1', '\0'};
+constexpr const char* kExpectedForms = "expected 'i x y z', 'r k' or 'box x0 y0 z0 x1 y1 z1'";
+
+std::string fmt_point(const Point3& p) {
+  std::string s = "(";
+  detail::append_double(s, p.x);
+  s += ", ";
+  detail::append_double(s, p.y);
+  s += ", ";
+  detail::append_double(s, p.z);
+  s += ")";
+  return s;
+}
+
+// Why a box is unusable, or nullptr.
+const char* box_problem(const Box& b) {
+  const double v[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
+  for (double d : v)
+    if (!std::isfinite(d)) return "has a non-finite coordinate";
+  if (b.lo.x > b.hi.x || b.lo.y > b.hi.y || b.lo.z > b.hi.z) return "has a lower corner above its upper corner";
+  return nullptr;
+}
+
+bool finite(const Point3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+
+// Tracks which insertions are live, to validate 'r k'.
+struct LiveSet {
+  std::vector<std::uint8_t> live;  // live[k]: insertion k made and not undone
+  // nullptr if 'r k' is fine here (and records it), else why not.
+  const char* remove(std::uint64_t k) {
+    if (k >= live.size()) return "names an insertion that has not been made yet";
+    if (!live[k]) return "names an insertion that was already undone";
+    live[k] = 0;
+    return nullptr;
+  }
+};
+
+// ---- text -----------------------------------------------------------------
+
+void parse_coords(InputFile& f, const std::string_view* fields, std::size_t count, double* out, const char* what) {
+  for (std::size_t i = 0; i < count; ++i) {
+    NumStatus s = detail::parse_double(fields[i], out[i]);
+    if (s != NumStatus::ok)
+      f.fail(std::string(what) + " field " + std::to_string(i + 1) + " " + detail::quote(fields[i]) + " " +
+             detail::describe(s) + "; expected a finite decimal number");
+  }
+}
+
+OpStream read_text(InputFile& f) {
+  OpStream st;
+  LiveSet live;
+  std::uint64_t box_line = 0;
+  std::string_view line;
+  std::string_view fields[8];
+  while (f.read_line(line)) {
+    std::size_t n = detail::split_fields(detail::strip_comment(line), fields, 8);
+    if (n == 0) continue;  // blank or comment
+    std::string_view verb = fields[0];
+    if (verb == "i") {
+      if (n != 4)
+        f.fail("'i' with " + std::to_string(n - 1) + " field" + (n == 2 ? "" : "s") +
+               "; expected 'i x y z' (3 coordinates)");
+      double c[3];
+      parse_coords(f, fields + 1, 3, c, "insertion");
+      Operation op;
+      op.kind = Operation::Kind::insert;
+      op.point = {c[0], c[1], c[2]};
+      if (st.box && !st.box->contains(op.point))
+        f.fail("point " + fmt_point(op.point) + " is outside the box declared on line " + std::to_string(box_line) +
+               "; expected every inserted point inside the box");
+      st.ops.push_back(op);
+      live.live.push_back(1);
+    } else if (verb == "r") {
+      if (n != 2)
+        f.fail("'r' with " + std::to_string(n - 1) + " fields; expected 'r k' (one insertion index)");
+      std::uint64_t k = 0;
+      NumStatus s = detail::parse_u64(fields[1], k);
+      if (s != NumStatus::ok)
+        f.fail("'r' index " + detail::quote(fields[1]) + " " +
+               (s == NumStatus::out_of_range ? "is too large" : "is not a non-negative integer") +
+               "; expected 'r k' with k the number (from 0) of an earlier 'i' line");
+      std::size_t made = live.live.size();
+      if (const char* why = live.remove(k))
+        f.fail("'r " + std::to_string(k) + "' " + why + " (" + std::to_string(made) +
+               " insertions so far); expected the index of an earlier, not yet undone 'i' line");
+      Operation op;
+      op.kind = Operation::Kind::remove;
+      op.target = k;
+      st.ops.push_back(op);
+    } else if (verb == "box") {
+      if (box_line != 0)
+        f.fail("second 'box' line (the first is line " + std::to_string(box_line) +
+               "); expected at most one box");
+      if (!st.ops.empty())
+        f.fail("'box' after operations; expected the box before any 'i' or 'r' line");
+      if (n != 7)
+        f.fail("'box' with " + std::to_string(n - 1) + " fields; expected 'box x0 y0 z0 x1 y1 z1' (6 numbers)");
+      double c[6];
+      parse_coords(f, fields + 1, 6, c, "box");
+      Box b{{c[0], c[1], c[2]}, {c[3], c[4], c[5]}};
+      if (const char* why = box_problem(b)) f.fail(std::string("the box ") + why + "; expected x0 <= x1, y0 <= y1, z0 <= z1");
+      st.box = b;
+      box_line = f.line();
+    } else {
+      f.fail("unknown verb " + detail::quote(verb) + "; " + kExpectedForms);
+    }
+  }
+  return st;
+}
+
+// ---- binary ---------------------------------------------------------------
+
+std::uint64_t load_u64(const unsigned char* p) {
+  std::uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+double load_f64(const unsigned char* p) { return std::bit_cast<double>(load_u64(p)); }
+void store_u64(unsigned char* p, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+void store_f64(unsigned char* p, double d) { store_u64(p, std::bit_cast<std::uint64_t>(d)); }
+
+[[noreturn]] void fail_bin(const InputFile& f, const std::string& where, const std::string& what) {
+  throw Error(ErrorCode::bad_format, f.path() + ": " + where + ": " + what);
+}
+
+OpStream read_binary(InputFile& f) {
+  OpStream st;
+  unsigned char head[8 + 1 + 48 + 8];
+  if (f.read_bytes(head, sizeof head) != sizeof head)
+    fail_bin(f, "header", "file ends inside the header; expected magic, box flag, box and count (65 bytes)");
+  const unsigned char has_box = head[8];
+  if (has_box > 1) fail_bin(f, "header", "box flag is " + std::to_string(has_box) + "; expected 0 or 1");
+  if (has_box) {
+    Box b{{load_f64(head + 9), load_f64(head + 17), load_f64(head + 25)},
+          {load_f64(head + 33), load_f64(head + 41), load_f64(head + 49)}};
+    if (const char* why = box_problem(b)) fail_bin(f, "header", std::string("the box ") + why);
+    st.box = b;
+  }
+  const std::uint64_t count = load_u64(head + 57);
+  // Reserve by what the file could hold at most (9 bytes per operation is the
+  // smallest record), never by the count alone: a corrupt count must not
+  // trigger a huge allocation. The file may be gzipped, so this is only a cap.
+  st.ops.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(count, 1u << 24)));
+  LiveSet live;
+  unsigned char rec[24];
+  for (std::uint64_t i = 0; i < count; ++i) {
+    const std::uint64_t at = f.offset();  // where this operation's record starts
+    auto where = [&] { return "operation " + std::to_string(i) + " (byte " + std::to_string(at) + ")"; };
+    unsigned char kind = 0;
+    if (f.read_bytes(&kind, 1) != 1)
+      fail_bin(f, where(), "file ends after " + std::to_string(i) + " of the " + std::to_string(count) +
+                               " operations the header announces");
+    Operation op;
+    if (kind == 0) {
+      if (f.read_bytes(rec, 24) != 24) fail_bin(f, where(), "file ends inside an insertion record (kind + 3 x f64)");
+      op.kind = Operation::Kind::insert;
+      op.point = {load_f64(rec), load_f64(rec + 8), load_f64(rec + 16)};
+      if (!finite(op.point)) fail_bin(f, where(), "insertion of a point with a NaN or infinite coordinate");
+      if (st.box && !st.box->contains(op.point))
+        fail_bin(f, where(), "point " + fmt_point(op.point) + " is outside the stream's box");
+      live.live.push_back(1);
+    } else if (kind == 1) {
+      if (f.read_bytes(rec, 8) != 8) fail_bin(f, where(), "file ends inside a removal record (kind + u64)");
+      op.kind = Operation::Kind::remove;
+      op.target = load_u64(rec);
+      std::size_t made = live.live.size();
+      if (const char* why = live.remove(op.target))
+        fail_bin(f, where(), "removal of insertion " + std::to_string(op.target) + " " + why + " (" +
+                                 std::to_string(made) + " insertions so far)");
+    } else {
+      fail_bin(f, where(), "unknown operation kind " + std::to_string(kind) + "; expected 0 (insert) or 1 (remove)");
+    }
+    st.ops.push_back(op);
+  }
+  if (!f.peek(1).empty())
+    fail_bin(f, "byte " + std::to_string(f.offset()), "extra data after the " + std::to_string(count) +
+                                                         " operations the header announces");
+  return st;
+}
+
+void validate_for_write(const OpStream& s) {
+  auto bad = [](const std::string& what) { throw Error(ErrorCode::invalid_argument, "write_ops: " + what); };
+  if (s.box)
+    if (const char* why = box_problem(*s.box)) bad(std::string("the box ") + why);
+  LiveSet live;
+  for (std::size_t i = 0; i < s.ops.size(); ++i) {
+    const Operation& op = s.ops[i];
+    if (op.kind == Operation::Kind::insert) {
+      if (!finite(op.point)) bad("operation " + std::to_string(i) + " inserts a point with a NaN or infinite coordinate");
+      if (s.box && !s.box->contains(op.point))
+        bad("operation " + std::to_string(i) + " inserts " + fmt_point(op.point) + ", outside the box");
+      live.live.push_back(1);
+    } else if (op.kind == Operation::Kind::remove) {
+      if (const char* why = live.remove(op.target))
+        bad("operation " + std::to_string(i) + " (remove " + std::to_string(op.target) + ") " + why);
+    } else {
+      bad("operation " + std::to_string(i) + " has an unknown kind");
+    }
+  }
+}
+
+}  // namespace
+
+OpStream read_ops(const std::string& path) {
+  InputFile f(path);
+  std::string_view head = f.peek(sizeof kMagic);
+  if (head.size() == sizeof kMagic && std::memcmp(head.data(), kMagic, sizeof kMagic) == 0)
+    return read_binary(f);  // reads the header from the magic on
+  return read_text(f);
+}
+
+void write_ops(const std::string& path, const OpStream& stream) {
+  validate_for_write(stream);
+  detail::OutputFile out(path);
+  if (detail::ends_with_nocase(path, ".opsb")) {
+    unsigned char head[8 + 1 + 48 + 8] = {};
+    std::memcpy(head, kMagic, 8);
+    head[8] = stream.box ? 1 : 0;
+    if (stream.box) {
+      const Box& b = *stream.box;
+      const double v[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
+      for (int i = 0; i < 6; ++i) store_f64(head + 9 + 8 * i, v[i]);
+    }
+    store_u64(head + 57, stream.ops.size());
+    out.out().put(head, sizeof head);
+    unsigned char rec[25];
+    for (const Operation& op : stream.ops) {
+      if (op.kind == Operation::Kind::insert) {
+        rec[0] = 0;
+        store_f64(rec + 1, op.point.x);
+        store_f64(rec + 9, op.point.y);
+        store_f64(rec + 17, op.point.z);
+        out.out().put(rec, 25);
+      } else {
+        rec[0] = 1;
+        store_u64(rec + 1, op.target);
+        out.out().put(rec, 9);
+      }
+    }
+  } else {
+    std::string line;
+    line.reserve(128);
+    line = "# pdt operation stream: ";
+    detail::append_uint(line, stream.insert_count());
+    line += " insertions, ";
+    detail::append_uint(line, stream.remove_count());
+    line += " removals\n";
+    out.put(line);
+    if (stream.box) {
+      const Box& b = *stream.box;
+      line = "box";
+      for (double d : {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z}) {
+        line += ' ';
+        detail::append_double(line, d);
+      }
+      line += '\n';
+      out.put(line);
+    }
+    for (const Operation& op : stream.ops) {
+      line.clear();
+      if (op.kind == Operation::Kind::insert) {
+        line += "i ";
+        detail::append_double(line, op.point.x);
+        line += ' ';
+        detail::append_double(line, op.point.y);
+        line += ' ';
+        detail::append_double(line, op.point.z);
+      } else {
+        line += "r ";
+        detail::append_uint(line, op.target);
+      }
+      line += '\n';
+      out.put(line);
+    }
+  }
+  out.commit();
+}
+
+}  // namespace pdt

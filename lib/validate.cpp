@@ -1,0 +1,138 @@
+// Triangulation::Impl::validate: the invariants I1..I5 of triangulation_impl.hpp.
+#include <sstream>
+#include <unordered_set>
+
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+using detail::facet_vertex;
+
+namespace {
+
+struct Failure {
+  std::ostringstream os;
+  template <class T>
+  Failure& operator<<(const T& x) {
+    os << x;
+    return *this;
+  }
+};
+
+}  // namespace
+
+bool Triangulation::Impl::validate(std::string* why) const {
+  Failure f;
+  auto fail = [&](Failure& msg) {
+    if (why) *why = msg.os.str();
+    return false;
+  };
+  // Vertices (I4) and counts.
+  std::size_t live_vertices = 0;
+  for (VertexId v = 1; v < verts.size(); ++v) {
+    if (verts[v].multiplicity == 0) continue;
+    ++live_vertices;
+    const KPoint& p = verts[v].p;
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z()))
+      return fail(f << "vertex " << v << " has a non-finite coordinate");
+    if (dim == 3) {
+      CellId c = verts[v].cell;
+      if (!cell_alive(c)) return fail(f << "vertex " << v << ": incident cell " << c << " is not a live cell");
+      if (index_of(c, v) < 0) return fail(f << "vertex " << v << ": incident cell " << c << " does not contain it");
+    }
+  }
+  const auto n_vertices = static_cast<std::size_t>(this->n_vertices.load());
+  const auto n_cells = static_cast<std::size_t>(this->n_cells.load());
+  const auto n_finite_cells = static_cast<std::size_t>(this->n_finite_cells.load());
+  const int dim = this->dim.load();
+  if (live_vertices != n_vertices)
+    return fail(f << "vertex count " << n_vertices << " but " << live_vertices << " live vertices");
+
+  if (dim < 3) {
+    if (n_cells != 0) return fail(f << "dimension " << dim << " but " << n_cells << " cells");
+    if (flat.size() != n_vertices) return fail(f << "flat list holds " << flat.size() << " of " << n_vertices);
+    for (std::size_t i = 0; i < flat.size(); ++i)
+      if (verts[flat[i]].cell != i) return fail(f << "flat vertex " << flat[i] << " has a wrong position");
+    int expect = -1;
+    const KPoint* b[3] = {nullptr, nullptr, nullptr};
+    for (VertexId v : flat) {
+      const KPoint& q = pt(v);
+      if (expect == -1) b[0] = &q, expect = 0;
+      else if (expect == 0) b[1] = &q, expect = 1;
+      else if (expect == 1 && !CGAL::collinear(*b[0], *b[1], q)) b[2] = &q, expect = 2;
+      else if (expect == 2 && detail::orient(*b[0], *b[1], *b[2], q) != 0)
+        return fail(f << "dimension " << dim << " but vertex " << v << " is off the plane of the others");
+    }
+    if (expect != dim) return fail(f << "dimension " << dim << " but the vertices span " << expect);
+    return true;
+  }
+
+  std::size_t live_cells = 0, finite_cells = 0;
+  for (CellId c = 0; c < cells.size(); ++c) {
+    if (!cell_alive(c)) continue;
+    ++live_cells;
+    const CellRec& r = cells[c];
+    bool finite = true;
+    // I1
+    for (int i = 0; i < 4; ++i) {
+      VertexId v = r.v[i];
+      if (v != 0 && !vertex_alive(v)) return fail(f << "cell " << c << " holds dead vertex " << v);
+      if (v == 0) finite = false;
+      for (int j = i + 1; j < 4; ++j)
+        if (r.v[j] == v) return fail(f << "cell " << c << " holds vertex " << v << " twice");
+    }
+    if (finite) ++finite_cells;
+    // I2
+    for (int i = 0; i < 4; ++i) {
+      CellId d = r.n[i] >> 2;
+      int j = static_cast<int>(r.n[i] & 3);
+      if (!cell_alive(d)) return fail(f << "cell " << c << " facet " << i << ": neighbour " << d << " is not live");
+      if (cells[d].n[j] != 4 * c + static_cast<std::uint32_t>(i))
+        return fail(f << "cell " << c << " facet " << i << ": neighbour " << d << " does not point back");
+      VertexId a[3], b[3];
+      for (int t = 0; t < 3; ++t) a[t] = r.v[facet_vertex[i][t]], b[t] = cells[d].v[facet_vertex[j][t]];
+      // Opposite orientation: b is a cyclic rotation of reversed a.
+      bool ok = false;
+      for (int s = 0; s < 3; ++s)
+        if (b[s] == a[0] && b[(s + 2) % 3] == a[1] && b[(s + 1) % 3] == a[2]) ok = true;
+      if (!ok) return fail(f << "cells " << c << " and " << d << " disagree on their shared facet");
+    }
+    // I3
+    if (finite && detail::orient(pt(r.v[0]), pt(r.v[1]), pt(r.v[2]), pt(r.v[3])) <= 0)
+      return fail(f << "cell " << c << " is not positively oriented");
+  }
+  if (live_cells != n_cells) return fail(f << "cell count " << n_cells << " but " << live_cells << " live cells");
+  if (finite_cells != n_finite_cells)
+    return fail(f << "finite cell count " << n_finite_cells << " but " << finite_cells << " finite cells");
+  // I5: local Delaunay (and hull convexity, through the infinite cells).
+  for (CellId c = 0; c < cells.size(); ++c) {
+    if (!cell_alive(c)) continue;
+    for (int i = 0; i < 4; ++i) {
+      CellId d = cells[c].n[i] >> 2;
+      VertexId opp = cells[d].v[cells[c].n[i] & 3];
+      if (opp == 0) continue;
+      if (in_conflict(c, pt(opp)))
+        return fail(f << "facet " << i << " of cell " << c << " is not locally Delaunay: vertex " << opp
+                      << " of neighbour " << d << " is inside its circumsphere");
+    }
+  }
+  // Euler: for a triangulation of the 3-sphere (with the infinite vertex), V - E + F - C = 0.
+  // With F = 2C: E = V + C.
+  std::unordered_set<std::uint64_t> edges;
+  edges.reserve(n_cells * 2);
+  for (CellId c = 0; c < cells.size(); ++c) {
+    if (!cell_alive(c)) continue;
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) {
+        VertexId a = cells[c].v[i], b = cells[c].v[j];
+        if (a > b) std::swap(a, b);
+        edges.insert((std::uint64_t{a} << 32) | b);
+      }
+  }
+  if (edges.size() != n_vertices + 1 + n_cells)
+    return fail(f << "Euler characteristic: " << n_vertices + 1 << " vertices, " << edges.size() << " edges, "
+                  << n_cells << " cells; not a triangulation of the sphere");
+  return true;
+}
+
+}  // namespace pdt

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Installs pdt's build dependencies from Debian 12 packages. Idempotent: packages
+# already present are left alone, so it is cheap to run before every build.
+set -euo pipefail
+packages=(build-essential cmake ninja-build pkg-config libtbb-dev libcgal-dev libgmp-dev libmpfr-dev
+          libboost-dev libmimalloc-dev catch2 zlib1g-dev)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "pdt: all build dependencies are installed"
+  exit 0
+fi
+echo "pdt: installing ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

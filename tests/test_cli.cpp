@@ -1,0 +1,192 @@
+// The `pdt` command-line tool, run as a separate process: exit codes, and
+// error messages naming file and line on stderr, for bad inputs and usage.
+#include <sys/wait.h>
+
+#include <catch2/catch.hpp>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+#include "common/io_test_util.hpp"
+#include "pdt/ops.hpp"
+
+using pdt_test::TempDir;
+using pdt_test::write_file;
+
+namespace {
+
+struct Result {
+  int code = -1;  // exit status, or -1 if the tool did not exit normally (crash)
+  std::string out, err;
+};
+
+bool have_tool() {
+#ifdef PDT_TOOL_PATH
+  if (std::filesystem::exists(PDT_TOOL_PATH)) return true;
+  WARN("pdt tool not found at " << PDT_TOOL_PATH << "; skipping");
+#else
+  WARN("PDT_TOOL_PATH not defined; skipping");
+#endif
+  return false;
+}
+
+// Runs `pdt <args>` with stdout and stderr captured in files of d.
+Result run_pdt(const TempDir& d, const std::string& args) {
+  Result r;
+#ifdef PDT_TOOL_PATH
+  const std::string out = d.file("stdout.txt"), err = d.file("stderr.txt");
+  const std::string cmd = std::string("'") + PDT_TOOL_PATH + "' " + args + " >'" + out + "' 2>'" + err + "' </dev/null";
+  const int status = std::system(cmd.c_str());
+  r.code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
+  r.out = pdt_test::read_file(out);
+  r.err = pdt_test::read_file(err);
+#else
+  (void)d;
+  (void)args;
+#endif
+  return r;
+}
+
+// A bad input: exit 2 and one "pdt: <file>:<line>: ..." message on stderr.
+void expect_input_error(const std::string& content, int line, const std::string& what) {
+  TempDir d;
+  const std::string p = d.file("in.ops");
+  write_file(p, content);
+  const Result r = run_pdt(d, "run '" + p + "'");
+  INFO("stream:\n" << content << "\nstderr: " << r.err);
+  CHECK(r.code == 2);
+  CHECK(r.err.rfind("pdt: " + p + ":" + std::to_string(line) + ": ", 0) == 0);
+  CHECK(r.err.find(what) != std::string::npos);
+  CHECK(r.out.empty());  // no summary for a stream that was not run
+}
+
+}  // namespace
+
+TEST_CASE("pdt rejects bad streams naming file and line, exit 2", "[cli]") {
+  if (!have_tool()) return;
+  SECTION("unknown verb") { expect_input_error("box 0 0 0 1 1 1\ni 0.5 0.5 0.5\nadd 1 2 3\n", 3, "unknown verb 'add'"); }
+  SECTION("NaN") { expect_input_error("i 0.5 0.5 0.5\ni 0.1 nan 0.2\n", 2, "not finite"); }
+  SECTION("r of an unknown insertion") { expect_input_error("i 0 0 0\ni 1 1 1\nr 0\nr 7\n", 4, "not been made yet"); }
+  SECTION("r twice") { expect_input_error("i 0 0 0\nr 0\n# again\nr 0\n", 4, "already undone"); }
+  SECTION("point outside the box") { expect_input_error("box 0 0 0 1 1 1\ni 0.5 0.5 2\n", 2, "outside the box"); }
+  SECTION("missing field") { expect_input_error("i 0.5 0.5\n", 1, "expected 'i x y z'"); }
+}
+
+TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  SECTION("missing input") {
+    const Result r = run_pdt(d, "run '" + d.file("missing.ops") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("pdt: cannot open '" + d.file("missing.ops") + "': No such file or directory") == 0);
+  }
+  SECTION("missing mesh for check") {
+    const Result r = run_pdt(d, "check '" + d.file("nothing.node") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("nothing.node") != std::string::npos);
+  }
+  SECTION("no command") {
+    const Result r = run_pdt(d, "");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("usage: pdt") != std::string::npos);
+  }
+  SECTION("unknown command") {
+    const Result r = run_pdt(d, "frobnicate");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("unknown command 'frobnicate'") != std::string::npos);
+    CHECK(r.err.find("usage: pdt") != std::string::npos);
+  }
+  SECTION("unknown option") {
+    const Result r = run_pdt(d, "gen --points 10 --colour blue --out '" + d.file("x.ops") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("unknown option '--colour'") != std::string::npos);
+    CHECK(r.err.find("usage: pdt gen") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(d.file("x.ops")));
+  }
+  SECTION("bad option values") {
+    for (const char* args : {"gen --points ten --out x.ops", "gen --points 10 --dist gaussian --out x.ops",
+                             "gen --points 10 --remove-fraction 2 --out x.ops", "gen --points 10", "gen --out x.ops",
+                             "gen --points", "run", "run a.ops b.ops", "run a.ops --threads -1",
+                             "run a.ops --out mesh.stl", "check"}) {
+      INFO(args);
+      const Result r = run_pdt(d, args);
+      CHECK(r.code == 2);
+      CHECK(r.err.rfind("pdt: ", 0) == 0);
+      CHECK(r.err.find("usage: pdt") != std::string::npos);
+    }
+  }
+  SECTION("help") {
+    for (const char* args : {"--help", "-h", "help", "help run", "gen --help", "run --help", "check --help"}) {
+      INFO(args);
+      const Result r = run_pdt(d, args);
+      CHECK(r.code == 0);
+      CHECK(r.out.find("usage: pdt") == 0);
+      CHECK(r.err.empty());
+    }
+  }
+}
+
+TEST_CASE("pdt gen, run and check work end to end", "[cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  const std::string ops = d.file("u.ops"), opsb = d.file("u.opsb"), mesh = d.file("mesh.node");
+  Result r = run_pdt(d, "gen --dist uniform --points 3000 --remove-fraction 0.5 --interleaved --seed 9 --out '" + ops + "'");
+  REQUIRE(r.code == 0);
+  CHECK(r.out.find("3,000 insertions, 1,500 removals") != std::string::npos);
+  r = run_pdt(d, "gen --dist=uniform --points=3e3 --remove-fraction=0.5 --interleaved --seed=9 --out='" + opsb + "'");
+  REQUIRE(r.code == 0);
+  // Same stream in both forms.
+  CHECK(pdt::read_ops(ops).ops.size() == pdt::read_ops(opsb).ops.size());
+
+  r = run_pdt(d, "run '" + opsb + "' --validate --out '" + mesh + "'");
+  INFO("stdout:\n" << r.out << "\nstderr:\n" << r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.out.find("vertices         1,500\n") != std::string::npos);
+  CHECK(r.out.find("insertions       3,000 (0 duplicates)") != std::string::npos);
+  CHECK(r.out.find("removals         1,500") != std::string::npos);
+  CHECK(r.out.find("validate         ok") != std::string::npos);
+  CHECK(r.out.find("peak memory") != std::string::npos);
+  CHECK(r.err.empty());  // no progress bar when stderr is not a terminal
+
+  r = run_pdt(d, "check '" + mesh + "'");
+  CHECK(r.code == 0);
+  CHECK(r.out.find("valid Delaunay tetrahedralization: 1500 points") != std::string::npos);
+
+  // Corrupt the mesh: drop the last tetrahedron (and fix the count).
+  std::string ele = pdt_test::read_file(d.file("mesh.ele"));
+  const std::size_t count = std::stoul(ele.substr(0, ele.find(' ')));
+  ele.erase(ele.rfind('\n', ele.size() - 2) + 1);
+  ele.replace(0, ele.find(' '), std::to_string(count - 1));
+  write_file(d.file("mesh.ele"), ele);
+  r = run_pdt(d, "check '" + mesh + "'");
+  CHECK(r.code == 1);
+  CHECK(r.out.find("INVALID") != std::string::npos);
+
+  // --threads other than 1: accepted, with a note, same result.
+  r = run_pdt(d, "run '" + ops + "' --threads 4 --out '" + d.file("m.vtu") + "'");
+  CHECK(r.code == 0);
+  CHECK(r.err.find("note: the parallel engine is not available yet") != std::string::npos);
+  CHECK(r.out.find("vertices         1,500\n") != std::string::npos);
+  CHECK(std::filesystem::exists(d.file("m.vtu")));
+
+  // Duplicates are counted, not fatal; removals lower the multiplicity.
+  write_file(d.file("dup.ops"), "i 0 0 0\ni 1 0 0\ni 0 1 0\ni 0 0 1\ni 0 0 0\nr 0\n");
+  r = run_pdt(d, "run '" + d.file("dup.ops") + "' --validate");
+  CHECK(r.code == 0);
+  CHECK(r.out.find("(1 duplicates)") != std::string::npos);
+  CHECK(r.out.find("vertices         4\n") != std::string::npos);
+}
+
+TEST_CASE("pdt gen is deterministic", "[cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  for (const char* dist : {"normal", "sphere"}) {
+    INFO(dist);
+    const std::string a = d.file("a.opsb"), b = d.file("b.opsb");
+    REQUIRE(run_pdt(d, std::string("gen --dist ") + dist + " --points 2000 --seed 3 --out '" + a + "'").code == 0);
+    REQUIRE(run_pdt(d, std::string("gen --dist ") + dist + " --points 2000 --seed 3 --out '" + b + "'").code == 0);
+    CHECK(pdt_test::read_file(a) == pdt_test::read_file(b));
+    REQUIRE(run_pdt(d, std::string("gen --dist ") + dist + " --points 2000 --seed 4 --out '" + b + "'").code == 0);
+    CHECK(pdt_test::read_file(a) != pdt_test::read_file(b));
+  }
+}

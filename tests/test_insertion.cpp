@@ -1,0 +1,881 @@
+// Insertion: pdt::Triangulation equals CGAL's Delaunay_triangulation_3 of the
+// same points, whatever the insertion order, on synthetic, degenerate and real
+// point sets; bad input is rejected without changing anything; locate(),
+// nearest_vertex() and hints behave.
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "common/cgal_reference.hpp"
+#include "pdt/error.hpp"
+#include "pdt/generate.hpp"
+#include "pdt/io.hpp"
+#include "pdt/triangulation.hpp"
+
+using namespace pdt_test;
+using pdt::Point3;
+
+namespace {
+
+std::vector<Point3> generated_points(pdt::Distribution dist, std::uint64_t n, std::uint64_t seed) {
+  pdt::GenerateOptions o;
+  o.dist = dist;
+  o.points = n;
+  o.seed = seed;
+  pdt::OpStream s = pdt::generate(o);
+  std::vector<Point3> pts;
+  for (const auto& op : s.ops)
+    if (op.kind == pdt::Operation::Kind::insert) pts.push_back(op.point);
+  return pts;
+}
+
+void require_valid(const pdt::Triangulation& t) {
+  std::string why;
+  const bool ok = t.validate(&why);
+  INFO("validate: " << why);
+  REQUIRE(ok);
+}
+
+// Builds a triangulation of `order` (inserted in that order), checks it
+// against the reference computed for `pts` (same points, any order) and
+// returns its canonical form (indices into pts).
+TetList build_and_check(const std::vector<Point3>& pts, const std::vector<Point3>& order, const CgalResult& ref) {
+  pdt::Triangulation t;
+  insert_all(t, order);
+  require_valid(t);
+  TetList got = canonical_tets(t, pts);
+  const bool same = got == ref.tets;
+  std::string mismatch = same ? std::string() : describe_mismatch(got, ref.tets, pts);
+  INFO(mismatch);
+  REQUIRE(same);
+  REQUIRE(t.dimension() == ref.dimension);
+  REQUIRE(t.number_of_vertices() == ref.vertices);
+  REQUIRE(t.number_of_finite_cells() == ref.tets.size());
+  if (ref.dimension == 3) REQUIRE(t.number_of_cells() == ref.cells);
+  std::string why;
+  const bool oriented = all_positively_oriented(t, &why);
+  INFO(why);
+  REQUIRE(oriented);
+  return got;
+}
+
+// The reference, then pdt with the given order and `orders` more shuffles;
+// all give the same canonical tetrahedra.
+void check_orders(const std::vector<Point3>& pts, int orders, std::uint64_t seed) {
+  const CgalResult ref = cgal_reference(pts);
+  std::vector<Point3> order = pts;
+  TetList first;
+  for (int k = 0; k <= orders; ++k) {
+    INFO("order " << k << " (0 = as given), seed " << seed);
+    if (k > 0) shuffle(order, seed * 1000 + k);
+    TetList got = build_and_check(pts, order, ref);
+    if (k == 0)
+      first = std::move(got);
+    else
+      REQUIRE((got == first));
+  }
+}
+
+std::vector<Point3> lattice(int n) {
+  std::vector<Point3> pts;
+  for (int x = 0; x < n; ++x)
+    for (int y = 0; y < n; ++y)
+      for (int z = 0; z < n; ++z) pts.push_back({double(x), double(y), double(z)});
+  return pts;
+}
+
+std::vector<Point3> cospherical(int r2) {
+  std::vector<Point3> pts;
+  const int r = static_cast<int>(std::sqrt(double(r2))) + 1;
+  for (int x = -r; x <= r; ++x)
+    for (int y = -r; y <= r; ++y)
+      for (int z = -r; z <= r; ++z)
+        if (x * x + y * y + z * z == r2) pts.push_back({double(x), double(y), double(z)});
+  return pts;
+}
+
+std::vector<Point3> read_or_empty(const std::string& rel, std::size_t max_points = 0) {
+  const std::string path = shared_data(rel);
+  if (!std::filesystem::exists(path)) {
+    WARN("data file absent, skipped: " << path);
+    return {};
+  }
+  std::vector<Point3> pts = pdt::read_points(path);
+  if (max_points && pts.size() > max_points) pts.resize(max_points);
+  return pts;
+}
+
+const pdt::Distribution all_dists[] = {pdt::Distribution::uniform, pdt::Distribution::normal, pdt::Distribution::line,
+                                       pdt::Distribution::grid, pdt::Distribution::sphere};
+
+}  // namespace
+
+TEST_CASE("insertion equals CGAL for every distribution and order", "[insert]") {
+  for (pdt::Distribution d : all_dists) {
+    for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+      INFO("distribution " << pdt::to_string(d) << ", seed " << seed);
+      std::vector<Point3> pts = generated_points(d, 3000, seed);
+      REQUIRE(pts.size() == 3000);
+      check_orders(pts, 2, seed);
+    }
+  }
+}
+
+TEST_CASE("insertion of an integer lattice", "[insert][degenerate]") {
+  std::vector<Point3> pts = lattice(6);
+  SECTION("lexicographic order") { check_orders(pts, 0, 1); }
+  SECTION("shuffled") {
+    shuffle(pts, 7);
+    check_orders(pts, 3, 7);
+  }
+  SECTION("reverse lexicographic order") {
+    std::reverse(pts.begin(), pts.end());
+    check_orders(pts, 0, 1);
+  }
+}
+
+TEST_CASE("insertion of exactly cospherical points", "[insert][degenerate]") {
+  for (int r2 : {50, 325, 2025}) {
+    std::vector<Point3> pts = cospherical(r2);
+    INFO("R^2 = " << r2 << ", " << pts.size() << " points");
+    REQUIRE(pts.size() >= 30);
+    check_orders(pts, 3, r2);
+    // With the centre added every point is a neighbour of it.
+    pts.push_back({0, 0, 0});
+    check_orders(pts, 1, r2 + 1);
+  }
+}
+
+TEST_CASE("coplanar start, then points off the plane", "[insert][degenerate]") {
+  std::vector<Point3> plane;
+  for (int x = 0; x < 20; ++x)
+    for (int y = 0; y < 20; ++y) plane.push_back({double(x), double(y), 0});
+  shuffle(plane, 3);
+  pdt::Triangulation t;
+  for (const auto& p : plane) REQUIRE(t.insert(p).inserted);
+  REQUIRE(t.dimension() == 2);
+  REQUIRE(t.number_of_vertices() == 400);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  REQUIRE(t.finite_cells().empty());
+  require_valid(t);
+
+  std::vector<Point3> all = plane;
+  std::mt19937_64 rng(11);
+  for (int k = 0; k < 100; ++k) {
+    Point3 p{uniform(rng, -1, 20), uniform(rng, -1, 20), uniform(rng, -3, 3)};
+    if (k == 0) p.z = 1.5;  // the first one surely off the plane
+    all.push_back(p);
+    t.insert(p);
+    if (k == 0) {
+      REQUIRE(t.dimension() == 3);
+      require_same_as_cgal(t, all);
+    }
+  }
+  require_valid(t);
+  require_same_as_cgal(t, all);
+  // Also with integer points above and below (many cospherical with the grid).
+  for (int x = 0; x < 20; x += 3)
+    for (int y = 0; y < 20; y += 4) {
+      all.push_back({double(x), double(y), double((x + y) % 3) - 1});
+      t.insert(all.back());
+    }
+  require_valid(t);
+  require_same_as_cgal(t, all);
+}
+
+TEST_CASE("collinear start, then a plane, then space", "[insert][degenerate]") {
+  pdt::Triangulation t;
+  std::vector<Point3> all;
+  for (int i = 0; i < 50; ++i) all.push_back({double((i * 37) % 50), double((i * 37) % 50) * 2, 0});
+  for (const auto& p : all) t.insert(p);
+  REQUIRE(t.dimension() == 1);
+  REQUIRE(t.number_of_vertices() == 50);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  require_valid(t);
+  all.push_back({0, 0, 0.0});  // duplicate of a point already on the line
+  REQUIRE_FALSE(t.insert(all.back()).inserted);
+  REQUIRE(t.dimension() == 1);
+  all.push_back({5, 0, 0});  // off the line, in the plane z = 0
+  t.insert(all.back());
+  REQUIRE(t.dimension() == 2);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  for (int i = 0; i < 10; ++i) {
+    all.push_back({double(i), double(3 * i % 7), 0});
+    t.insert(all.back());
+  }
+  REQUIRE(t.dimension() == 2);
+  all.push_back({1, 2, 3});
+  t.insert(all.back());
+  REQUIRE(t.dimension() == 3);
+  require_valid(t);
+  require_same_as_cgal(t, all);
+  for (int i = 0; i < 40; ++i) {
+    all.push_back({double(i % 5), double(i % 7), double(i % 3) - 1});
+    t.insert(all.back());
+  }
+  require_valid(t);
+  require_same_as_cgal(t, all);
+}
+
+TEST_CASE("points coplanar forever", "[insert][degenerate]") {
+  // The plane x + 2y - z = 3, with integer and with dyadic coordinates: exact.
+  pdt::Triangulation t;
+  std::vector<Point3> pts;
+  std::mt19937_64 rng(5);
+  for (int k = 0; k < 300; ++k) {
+    double x = double(rng() % 1000) / 8, y = double(rng() % 1000) / 16;
+    pts.push_back({x, y, x + 2 * y - 3});
+  }
+  std::size_t distinct = make_point_index(pts).size();
+  for (const auto& p : pts) t.insert(p);
+  REQUIRE(t.dimension() == 2);
+  REQUIRE(t.number_of_vertices() == distinct);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  REQUIRE(t.finite_cells().empty());
+  REQUIRE(t.locate({1, 1, 1}).kind == pdt::LocateKind::none);
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
+TEST_CASE("fewer than 4 points and the first tetrahedron", "[insert]") {
+  pdt::Triangulation t;
+  REQUIRE(t.dimension() == -1);
+  REQUIRE(t.number_of_vertices() == 0);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  REQUIRE(t.vertices().empty());
+  REQUIRE(t.nearest_vertex({0, 0, 0}) == pdt::no_vertex);
+  require_valid(t);
+
+  auto a = t.insert({0, 0, 0});
+  REQUIRE(a.inserted);
+  REQUIRE(a.vertex != pdt::infinite_vertex);
+  REQUIRE(t.is_vertex(a.vertex));
+  REQUIRE(t.point(a.vertex) == Point3{0, 0, 0});
+  REQUIRE(t.dimension() == 0);
+  REQUIRE(t.number_of_vertices() == 1);
+  require_valid(t);
+
+  auto b = t.insert({1, 0, 0});
+  REQUIRE(b.inserted);
+  REQUIRE(b.vertex != a.vertex);
+  REQUIRE(t.dimension() == 1);
+  auto c = t.insert({2, 0, 0});  // collinear
+  REQUIRE(t.dimension() == 1);
+  auto d = t.insert({0, 1, 0});
+  REQUIRE(t.dimension() == 2);
+  REQUIRE(t.number_of_finite_cells() == 0);
+  require_valid(t);
+  auto e = t.insert({0, 0, 1});
+  REQUIRE(t.dimension() == 3);
+  // 5 points, 4 of them (a, c, d, e) spanning the hull and b on edge ac: 2 tets.
+  REQUIRE(t.number_of_vertices() == 5);
+  REQUIRE(t.number_of_finite_cells() == 2);
+  require_valid(t);
+  require_same_as_cgal(t);
+  const std::set<pdt::VertexId> ids{a.vertex, b.vertex, c.vertex, d.vertex, e.vertex};
+  REQUIRE(ids.size() == 5);
+  REQUIRE(std::vector<pdt::VertexId>(ids.begin(), ids.end()) == t.vertices());
+
+  SECTION("exactly 4 points: one tetrahedron, four infinite cells") {
+    pdt::Triangulation u;
+    u.insert({0, 0, 0});
+    u.insert({1, 0, 0});
+    u.insert({0, 1, 0});
+    REQUIRE(u.dimension() == 2);
+    u.insert({0, 0, 1});
+    REQUIRE(u.dimension() == 3);
+    REQUIRE(u.number_of_finite_cells() == 1);
+    REQUIRE(u.number_of_cells() == 5);
+    require_valid(u);
+    require_same_as_cgal(u);
+  }
+  SECTION("clear empties") {
+    t.clear();
+    REQUIRE(t.dimension() == -1);
+    REQUIRE(t.number_of_vertices() == 0);
+    REQUIRE(t.number_of_cells() == 0);
+    REQUIRE(t.vertices().empty());
+    require_valid(t);
+    insert_all(t, random_points(100, 3));
+    require_valid(t);
+    require_same_as_cgal(t);
+  }
+}
+
+TEST_CASE("duplicates raise the multiplicity", "[insert]") {
+  std::vector<Point3> pts = random_points(500, 21);
+  pdt::Triangulation t;
+  std::vector<pdt::VertexId> ids = insert_all(t, pts);
+  const TetList before = canonical_tets(t, pts);
+  const auto stats_before = t.stats();
+  for (std::size_t i = 0; i < pts.size(); i += 7) {
+    auto r = t.insert(pts[i]);
+    REQUIRE_FALSE(r.inserted);
+    REQUIRE(r.vertex == ids[i]);
+    REQUIRE(t.multiplicity(ids[i]) == 2);
+  }
+  const std::size_t dups = (pts.size() + 6) / 7;
+  REQUIRE(t.number_of_vertices() == pts.size());
+  REQUIRE((canonical_tets(t, pts) == before));
+  REQUIRE(t.stats().duplicates == stats_before.duplicates + dups);
+  REQUIRE(t.stats().insertions == stats_before.insertions + dups);
+  auto r = t.insert(pts[0]);
+  REQUIRE_FALSE(r.inserted);
+  REQUIRE(t.multiplicity(ids[0]) == 3);
+  REQUIRE(t.multiplicity(ids[1]) == 1);
+  require_valid(t);
+
+  SECTION("negative zero equals zero") {
+    pdt::Triangulation u;
+    auto a = u.insert({0, 0, 0});
+    auto b = u.insert({-0.0, 0.0, -0.0});
+    REQUIRE_FALSE(b.inserted);
+    REQUIRE(b.vertex == a.vertex);
+    REQUIRE(u.number_of_vertices() == 1);
+  }
+  SECTION("duplicates in lower dimensions") {
+    pdt::Triangulation u;
+    for (int k = 0; k < 3; ++k) {
+      u.insert({0, 0, 0});
+      u.insert({1, 1, 1});
+      u.insert({2, 2, 2});
+      u.insert({2, 0, 0});
+    }
+    REQUIRE(u.number_of_vertices() == 4);
+    REQUIRE(u.dimension() == 2);
+    for (auto v : u.vertices()) REQUIRE(u.multiplicity(v) == 3);
+    require_valid(u);
+  }
+}
+
+TEST_CASE("points on the convex hull", "[insert][degenerate]") {
+  // Cube corners, then integer points on the faces, then inside.
+  std::vector<Point3> pts;
+  for (int x : {0, 4})
+    for (int y : {0, 4})
+      for (int z : {0, 4}) pts.push_back({double(x), double(y), double(z)});
+  for (int i = 0; i <= 4; ++i)
+    for (int j = 0; j <= 4; ++j)
+      for (int f = 0; f < 2; ++f) {
+        double c = f * 4.0;
+        pts.push_back({c, double(i), double(j)});
+        pts.push_back({double(i), c, double(j)});
+        pts.push_back({double(i), double(j), c});
+      }
+  std::vector<Point3> shell = pts;
+  check_orders(shell, 2, 31);  // duplicates among the face points
+  pdt::Triangulation t;
+  insert_all(t, shell);
+  REQUIRE(t.number_of_vertices() == 5 * 5 * 5 - 3 * 3 * 3);
+  std::vector<Point3> all = shell;
+  for (const auto& p : random_points(60, 32, 0.5, 3.5)) {
+    all.push_back(p);
+    t.insert(p);
+  }
+  require_valid(t);
+  require_same_as_cgal(t, all);
+  // Points on a face after the interior exists.
+  pdt::Triangulation u;
+  std::vector<Point3> order = random_points(40, 33, 0.5, 3.5);
+  for (int k = 0; k < 8; ++k) order.push_back(pts[k]);
+  for (std::size_t k = 8; k < pts.size(); ++k) order.push_back(pts[k]);
+  insert_all(u, order);
+  require_valid(u);
+  require_same_as_cgal(u, order);
+}
+
+TEST_CASE("real point sets equal CGAL", "[insert][real]") {
+  struct Case {
+    const char* file;
+    std::size_t max_points;
+    int shuffles;
+  };
+  const Case cases[] = {
+      {"scans/cgal_b9.ply", 0, 1},
+      {"degenerate/cgal_radar.xyz", 0, 1},
+      {"degenerate/cgal_error_mesh-p_not_equal_0-min2.off", 0, 5},
+      {"medical/cgal_femur.off", 0, 2},
+      {"scans/stanford_bunny_bun000.ply", 20000, 1},
+      {"scans/pdal_autzen_trim.xyz.gz", 20000, 1},
+      // Heavily quantised, with exact duplicates; a stereo scan with few z values.
+      {"scans/pcl_isprs_CSite4_orig-utm.ply", 20000, 0},
+      {"scans/pcl_table_scene_mug_stereo_textured.xyz.gz", 20000, 0},
+  };
+  for (const Case& c : cases) {
+    INFO("file " << c.file);
+    std::vector<Point3> pts = read_or_empty(c.file, c.max_points);
+    if (pts.empty()) continue;
+    check_orders(pts, c.shuffles, 99);
+  }
+}
+
+TEST_CASE("TetGen degenerate PLC node sets equal CGAL", "[insert][real][degenerate]") {
+  const std::string dir = shared_data("degenerate/tetgen_testingdrafts");
+  if (!std::filesystem::exists(dir)) {
+    WARN("data directory absent, skipped: " << dir);
+    return;
+  }
+  std::vector<std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().extension() == ".smesh") files.push_back(e.path().string());
+  std::sort(files.begin(), files.end());
+  REQUIRE(!files.empty());
+  for (const auto& f : files) {
+    INFO("file " << f);
+    std::vector<Point3> pts = pdt::read_points(f);
+    REQUIRE(pts.size() >= 4);
+    check_orders(pts, 5, 17);
+  }
+}
+
+TEST_CASE("non-finite coordinates are rejected and change nothing", "[insert][error]") {
+  const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                        -std::numeric_limits<double>::infinity()};
+  auto check = [&](pdt::Triangulation& t, const std::vector<Point3>& pts) {
+    const TetList before = canonical_tets(t, pts);
+    const std::size_t nv = t.number_of_vertices(), nc = t.number_of_cells();
+    const int dim = t.dimension();
+    const auto vs = t.vertices();
+    for (double b : bad)
+      for (int coord = 0; coord < 3; ++coord) {
+        Point3 p{0.25, 0.5, 0.75};
+        (coord == 0 ? p.x : coord == 1 ? p.y : p.z) = b;
+        INFO("coordinate " << coord << " = " << b);
+        bool threw = false;
+        try {
+          t.insert(p);
+        } catch (const pdt::Error& e) {
+          threw = true;
+          REQUIRE(e.code() == pdt::ErrorCode::non_finite_coordinate);
+          REQUIRE(std::string(e.what()).size() > 0);
+        }
+        REQUIRE(threw);
+        // With a hint too.
+        REQUIRE_THROWS_AS(t.insert(p, pdt::Hint{vs.empty() ? pdt::no_vertex : vs[0], pdt::no_cell}), pdt::Error);
+        REQUIRE(t.number_of_vertices() == nv);
+        REQUIRE(t.number_of_cells() == nc);
+        REQUIRE(t.dimension() == dim);
+        REQUIRE((t.vertices() == vs));
+      }
+    // Several bad coordinates at once.
+    REQUIRE_THROWS_AS(t.insert({bad[0], bad[1], bad[2]}), pdt::Error);
+    REQUIRE((canonical_tets(t, pts) == before));
+    REQUIRE(t.number_of_vertices() == nv);
+    require_valid(t);
+  };
+  SECTION("empty") {
+    pdt::Triangulation t;
+    check(t, {});
+    REQUIRE(t.dimension() == -1);
+  }
+  SECTION("dimension 2") {
+    pdt::Triangulation t;
+    std::vector<Point3> pts{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    insert_all(t, pts);
+    check(t, pts);
+  }
+  SECTION("dimension 3") {
+    pdt::Triangulation t;
+    std::vector<Point3> pts = random_points(300, 41);
+    insert_all(t, pts);
+    check(t, pts);
+    // Still usable afterwards.
+    pts.push_back({0.25, 0.5, 0.75});
+    REQUIRE(t.insert(pts.back()).inserted);
+    require_same_as_cgal(t, pts);
+  }
+}
+
+namespace {
+
+pdt::LocateKind expected_kind(CDelaunay::Locate_type lt) {
+  switch (lt) {
+    case CDelaunay::CELL: return pdt::LocateKind::in_cell;
+    case CDelaunay::FACET: return pdt::LocateKind::on_facet;
+    case CDelaunay::EDGE: return pdt::LocateKind::on_edge;
+    case CDelaunay::VERTEX: return pdt::LocateKind::on_vertex;
+    case CDelaunay::OUTSIDE_CONVEX_HULL: return pdt::LocateKind::outside_hull;
+    default: return pdt::LocateKind::none;
+  }
+}
+
+// Checks that the cell t.locate returned for q is consistent with the kind.
+void check_locate_cell(const pdt::Triangulation& t, const Point3& q, const pdt::LocateResult& r) {
+  REQUIRE(r.cell != pdt::no_cell);
+  REQUIRE(t.is_cell(r.cell));
+  int inf = -1;
+  for (int i = 0; i < 4; ++i)
+    if (t.cell_vertex(r.cell, i) == pdt::infinite_vertex) inf = i;
+  if (r.kind == pdt::LocateKind::outside_hull) {
+    REQUIRE_FALSE(t.is_finite_cell(r.cell));
+    REQUIRE(inf >= 0);
+    // q strictly beyond the cell's finite facet.
+    CPoint p[4];
+    for (int i = 0; i < 4; ++i) p[i] = i == inf ? to_cgal(q) : to_cgal(t.point(t.cell_vertex(r.cell, i)));
+    REQUIRE(CGAL::orientation(p[0], p[1], p[2], p[3]) == CGAL::POSITIVE);
+    return;
+  }
+  REQUIRE(t.is_finite_cell(r.cell));
+  REQUIRE(inf == -1);
+  CPoint p[4];
+  for (int i = 0; i < 4; ++i) p[i] = to_cgal(t.point(t.cell_vertex(r.cell, i)));
+  int zeros = 0;
+  for (int i = 0; i < 4; ++i) {
+    CPoint s[4] = {p[0], p[1], p[2], p[3]};
+    s[i] = to_cgal(q);
+    auto o = CGAL::orientation(s[0], s[1], s[2], s[3]);
+    REQUIRE(o != CGAL::NEGATIVE);  // q in the closed cell
+    zeros += o == CGAL::ZERO;
+  }
+  const int want = r.kind == pdt::LocateKind::in_cell    ? 0
+                   : r.kind == pdt::LocateKind::on_facet ? 1
+                   : r.kind == pdt::LocateKind::on_edge  ? 2
+                                                         : 3;
+  REQUIRE(zeros == want);
+  if (r.kind == pdt::LocateKind::on_vertex) {
+    REQUIRE(t.is_vertex(r.vertex));
+    REQUIRE(t.point(r.vertex) == q);
+    bool in_cell = false;
+    for (int i = 0; i < 4; ++i) in_cell |= t.cell_vertex(r.cell, i) == r.vertex;
+    REQUIRE(in_cell);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("locate reports the right kind and cell", "[insert][locate]") {
+  SECTION("one tetrahedron, by hand") {
+    pdt::Triangulation t;
+    auto o = t.insert({0, 0, 0}).vertex;
+    t.insert({4, 0, 0});
+    t.insert({0, 4, 0});
+    t.insert({0, 0, 4});
+    struct Q {
+      Point3 p;
+      pdt::LocateKind k;
+    };
+    const Q qs[] = {
+        {{1, 1, 1}, pdt::LocateKind::in_cell},       {{1, 1, 0}, pdt::LocateKind::on_facet},
+        {{1, 1, 2}, pdt::LocateKind::on_facet},      {{2, 0, 0}, pdt::LocateKind::on_edge},
+        {{0, 2, 2}, pdt::LocateKind::on_edge},       {{0, 0, 0}, pdt::LocateKind::on_vertex},
+        {{5, 5, 5}, pdt::LocateKind::outside_hull},  {{-1, 1, 1}, pdt::LocateKind::outside_hull},
+        {{8, 0, 0}, pdt::LocateKind::outside_hull},  {{2, 2, 1}, pdt::LocateKind::outside_hull},
+    };
+    for (const auto& q : qs) {
+      INFO("query " << str(q.p));
+      auto r = t.locate(q.p);
+      REQUIRE(r.kind == q.k);
+      check_locate_cell(t, q.p, r);
+    }
+    REQUIRE(t.locate({0, 0, 0}).vertex == o);
+  }
+
+  SECTION("lattice triangulation: cell centroids, facet and edge points, vertices") {
+    std::vector<Point3> pts;
+    std::mt19937_64 rng(51);
+    for (int k = 0; k < 200; ++k) pts.push_back({double(rng() % 16), double(rng() % 16), double(rng() % 16)});
+    pdt::Triangulation t;
+    insert_all(t, pts);
+    REQUIRE(t.dimension() == 3);
+    auto cells = t.finite_cells();
+    std::size_t checked = 0;
+    for (std::size_t c = 0; c < cells.size(); c += 5) {
+      Point3 v[4];
+      for (int i = 0; i < 4; ++i) v[i] = t.point(cells[c][i]);
+      // Exact dyadic combinations of integer points.
+      Point3 in{(v[0].x + v[1].x + v[2].x + v[3].x) / 4, (v[0].y + v[1].y + v[2].y + v[3].y) / 4,
+                (v[0].z + v[1].z + v[2].z + v[3].z) / 4};
+      Point3 fa{(v[0].x + v[1].x + 2 * v[2].x) / 4, (v[0].y + v[1].y + 2 * v[2].y) / 4,
+                (v[0].z + v[1].z + 2 * v[2].z) / 4};
+      Point3 ed{(v[1].x + v[3].x) / 2, (v[1].y + v[3].y) / 2, (v[1].z + v[3].z) / 2};
+      INFO("cell " << c);
+      auto ri = t.locate(in);
+      REQUIRE(ri.kind == pdt::LocateKind::in_cell);
+      check_locate_cell(t, in, ri);
+      auto rf = t.locate(fa);
+      REQUIRE(rf.kind == pdt::LocateKind::on_facet);
+      check_locate_cell(t, fa, rf);
+      auto re = t.locate(ed);
+      REQUIRE(re.kind == pdt::LocateKind::on_edge);
+      check_locate_cell(t, ed, re);
+      auto rv = t.locate(v[c % 4], pdt::Hint{cells[c][(c + 1) % 4], pdt::no_cell});
+      REQUIRE(rv.kind == pdt::LocateKind::on_vertex);
+      REQUIRE(rv.vertex == cells[c][c % 4]);
+      check_locate_cell(t, v[c % 4], rv);
+      ++checked;
+    }
+    REQUIRE(checked > 10);
+  }
+
+  SECTION("random queries agree with CGAL's locate") {
+    std::vector<Point3> pts = random_points(2000, 61, 0.1, 0.9);
+    pdt::Triangulation t;
+    insert_all(t, pts);
+    std::vector<std::pair<CPoint, std::uint32_t>> cp;
+    for (std::uint32_t i = 0; i < pts.size(); ++i) cp.emplace_back(to_cgal(pts[i]), i);
+    CDelaunay dt(cp.begin(), cp.end());
+    std::mt19937_64 rng(62);
+    std::vector<Point3> queries = random_points(2000, 63, -0.2, 1.2);
+    for (int k = 0; k < 200; ++k) queries.push_back(pts[rng() % pts.size()]);
+    // On the hull: a vertex of an infinite facet, and midpoints of hull edges.
+    for (auto f = dt.finite_facets_begin(); f != dt.finite_facets_end(); ++f) {
+      if (!dt.is_infinite(f->first) && !dt.is_infinite(f->first->neighbor(f->second))) continue;
+      const auto& a = f->first->vertex((f->second + 1) % 4)->point();
+      const auto& b = f->first->vertex((f->second + 2) % 4)->point();
+      queries.push_back({(a.x() + b.x()) / 2, (a.y() + b.y()) / 2, (a.z() + b.z()) / 2});
+    }
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < queries.size(); ++k) {
+      const Point3& q = queries[k];
+      CDelaunay::Locate_type lt;
+      int li, lj;
+      dt.locate(to_cgal(q), lt, li, lj);
+      auto r = t.locate(q);
+      INFO("query " << str(q));
+      REQUIRE(r.kind == expected_kind(lt));
+      check_locate_cell(t, q, r);
+      // With a hint (any vertex): same kind.
+      auto rh = t.locate(q, pdt::Hint{t.vertices()[k % t.number_of_vertices()], pdt::no_cell});
+      REQUIRE(rh.kind == r.kind);
+      ++n;
+    }
+    REQUIRE(n > 2200);
+  }
+}
+
+TEST_CASE("nearest_vertex equals brute force", "[insert][nearest]") {
+  auto brute_check = [](const pdt::Triangulation& t, const Point3& q) {
+    const auto vs = t.vertices();
+    pdt::VertexId best = vs.at(0);
+    for (auto v : vs)
+      if (CGAL::compare_distance_to_point(to_cgal(q), to_cgal(t.point(v)), to_cgal(t.point(best))) == CGAL::SMALLER)
+        best = v;
+    pdt::VertexId got = t.nearest_vertex(q);
+    INFO("query " << str(q) << " got " << got << " best " << best);
+    REQUIRE(t.is_vertex(got));
+    REQUIRE(CGAL::compare_distance_to_point(to_cgal(q), to_cgal(t.point(got)), to_cgal(t.point(best))) ==
+            CGAL::EQUAL);
+  };
+  SECTION("uniform points, queries inside and outside the hull") {
+    pdt::Triangulation t;
+    insert_all(t, random_points(1500, 71));
+    for (const auto& q : random_points(300, 72, -0.5, 1.5)) brute_check(t, q);
+    for (const auto& v : t.vertices()) {
+      if (v % 50) continue;
+      REQUIRE(t.nearest_vertex(t.point(v)) == v);
+    }
+  }
+  SECTION("lattice points, half-integer queries (ties)") {
+    pdt::Triangulation t;
+    std::vector<Point3> pts = lattice(5);
+    shuffle(pts, 73);
+    insert_all(t, pts);
+    std::mt19937_64 rng(74);
+    for (int k = 0; k < 200; ++k)
+      brute_check(t, {double(rng() % 13) / 2 - 1, double(rng() % 13) / 2 - 1, double(rng() % 13) / 2 - 1});
+  }
+  SECTION("lower dimensions") {
+    pdt::Triangulation t;
+    t.insert({0, 0, 0});
+    brute_check(t, {5, 5, 5});
+    t.insert({1, 0, 0});
+    brute_check(t, {0.75, 3, 0});
+    brute_check(t, {0.25, 3, 0});
+    t.insert({0, 1, 0});
+    REQUIRE(t.dimension() == 2);
+    for (const auto& q : random_points(30, 75, -1, 2)) brute_check(t, q);
+  }
+}
+
+TEST_CASE("hints do not change the result", "[insert][hint]") {
+  for (pdt::Distribution d : {pdt::Distribution::uniform, pdt::Distribution::grid, pdt::Distribution::sphere}) {
+    INFO("distribution " << pdt::to_string(d));
+    std::vector<Point3> pts = generated_points(d, 2000, 5);
+    const CgalResult ref = cgal_reference(pts);
+    pdt::Triangulation a, b, c;
+    pdt::VertexId prev = pdt::no_vertex, first = pdt::no_vertex;
+    std::mt19937_64 rng(6);
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      auto r = a.insert(pts[i], pdt::Hint{prev, pdt::no_cell});
+      prev = r.vertex;
+      // A far, arbitrary hint: the first vertex.
+      auto rb = b.insert(pts[i], pdt::Hint{first, pdt::no_cell});
+      if (first == pdt::no_vertex) first = rb.vertex;
+      // A cell hint, when there are cells.
+      pdt::CellId hc = pdt::no_cell;
+      if (c.dimension() == 3) {
+        for (pdt::CellId id = static_cast<pdt::CellId>(rng() % c.cell_id_bound()); id < c.cell_id_bound(); ++id)
+          if (c.is_cell(id)) {
+            hc = id;
+            break;
+          }
+      }
+      c.insert(pts[i], pdt::Hint{pdt::no_vertex, hc});
+    }
+    for (pdt::Triangulation* t : {&a, &b, &c}) {
+      require_valid(*t);
+      REQUIRE((canonical_tets(*t, pts) == ref.tets));
+    }
+  }
+}
+
+TEST_CASE("stale and out-of-range hints are harmless", "[insert][hint]") {
+  // A hint is only advice: a refiner may hand over a vertex that has since
+  // disappeared. The result must not depend on it.
+  std::vector<Point3> pts = random_points(1500, 201);
+  pdt::Triangulation t;
+  std::vector<pdt::VertexId> ids = insert_all(t, pts);
+  std::vector<Point3> all(pts.begin() + 100, pts.end());
+  for (int k = 0; k < 100; ++k) t.remove(ids[k]);
+  const std::vector<Point3> extra = random_points(400, 202, -0.2, 1.2);
+  for (std::size_t k = 0; k < extra.size(); ++k) {
+    pdt::Hint h;
+    switch (k % 4) {
+      case 0: h = {ids[k % 100], pdt::no_cell}; break;                       // removed vertex
+      case 1: h = {t.vertex_id_bound() + 7, pdt::no_cell}; break;           // never issued
+      case 2: h = {pdt::infinite_vertex, t.cell_id_bound() + 3}; break;     // infinite vertex, bad cell
+      default: h = {pdt::no_vertex, static_cast<pdt::CellId>(k)}; break;    // any cell id, maybe free
+    }
+    t.insert(extra[k], h);
+    all.push_back(extra[k]);
+    const auto r = t.locate(extra[k], h);
+    REQUIRE(r.kind == pdt::LocateKind::on_vertex);
+  }
+  require_valid(t);
+  require_same_as_cgal(t, all);
+}
+
+TEST_CASE("extreme but finite coordinates equal CGAL", "[insert][extreme]") {
+  // Coordinates are used exactly, whatever their magnitude: predicates are
+  // exact; nothing else (point location, grids) may overflow or underflow.
+  auto scaled = [](std::size_t n, std::uint64_t seed, double scale, double offset) {
+    std::vector<Point3> pts = random_points(n, seed, -1, 1);
+    for (auto& p : pts) p = {offset + p.x * scale, offset + p.y * scale, offset + p.z * scale};
+    return pts;
+  };
+  auto check = [](const std::vector<Point3>& pts) {
+    pdt::Triangulation t;
+    insert_all(t, pts);
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+  };
+  SECTION("magnitude 1e300") { check(scaled(500, 211, 1e300, 0)); }
+  SECTION("magnitude 1e-300") { check(scaled(500, 212, 1e-300, 0)); }
+  SECTION("large offset, small extent") { check(scaled(500, 213, 1e-3, 1e9)); }
+  SECTION("mixed magnitudes") {
+    std::vector<Point3> pts = random_points(300, 214);
+    pts.push_back({1e300, 0, 0});
+    pts.push_back({0, -1e300, 1e-300});
+    pts.push_back({-1e300, 1e300, 1e300});
+    pts.push_back({1e-300, 1e-300, -1e-300});
+    check(pts);
+  }
+  SECTION("subnormal coordinates: 4 points") {
+    const double d = 1e-310;
+    check({{0, 0, 0}, {d, 0, 0}, {0, d, 0}, {0, 0, d}});
+  }
+  SECTION("subnormal coordinates: many points") { check(scaled(300, 215, 1e-310, 0)); }
+  SECTION("the largest doubles: 4 points") {
+    const double m = std::numeric_limits<double>::max();
+    check({{-m, -m, -m}, {m, -m, -m}, {-m, m, -m}, {-m, -m, m}});
+  }
+  SECTION("the largest doubles: cube corners and inside") {
+    const double m = std::numeric_limits<double>::max();
+    std::vector<Point3> pts;
+    for (int x : {-1, 1})
+      for (int y : {-1, 1})
+        for (int z : {-1, 1}) pts.push_back({x * m, y * m, z * m});
+    for (const auto& p : scaled(200, 216, m, 0)) pts.push_back(p);
+    check(pts);
+  }
+}
+
+TEST_CASE("cocircular coplanar start, then apexes", "[insert][degenerate]") {
+  // Integer points on the circle x^2 + y^2 = 1105 (= 5*13*17: 32 of them):
+  // the 2D triangulation is decided by the perturbation alone.
+  std::vector<Point3> circle;
+  for (int x = -34; x <= 34; ++x)
+    for (int y = -34; y <= 34; ++y)
+      if (x * x + y * y == 1105) circle.push_back({double(x), double(y), 0});
+  REQUIRE(circle.size() == 32);
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    INFO("seed " << seed);
+    std::vector<Point3> pts = circle;
+    shuffle(pts, seed);
+    pdt::Triangulation t;
+    insert_all(t, pts);
+    REQUIRE(t.dimension() == 2);
+    require_valid(t);
+    // An apex on the axis: cospherical with the whole circle.
+    pts.push_back({0, 0, 7});
+    t.insert(pts.back());
+    REQUIRE(t.dimension() == 3);
+    // Any triangulation of 32 points in convex position has 30 triangles.
+    REQUIRE(t.number_of_finite_cells() == 30);
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+    pts.push_back({0, 0, -7});  // the mirror apex: all 34 points cospherical
+    t.insert(pts.back());
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+    pts.push_back({0, 0, 0});  // the centre, on the plane
+    t.insert(pts.back());
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+  }
+}
+
+TEST_CASE("coplanar start: apex positions", "[insert][degenerate]") {
+  // The 3D triangulation is built from a 2D one when the first point leaves
+  // the plane: every tetrahedron then has that apex, one per 2D triangle.
+  std::vector<Point3> grid;
+  for (int x = 0; x < 8; ++x)
+    for (int y = 0; y < 6; ++y) grid.push_back({double(x), double(y), 0});
+  const std::size_t triangles = 2 * 8 * 6 - (2 * 8 + 2 * 6 - 4) - 2;  // 2n - h - 2
+  const Point3 apexes[] = {{3, 2, 1},   {3.5, 2.5, -1}, {0, 0, 1},  {7, 5, -2}, {20, 20, 1},
+                           {-5, 2, 0.5}, {3, -10, 3},   {7, 0, 1e-9}, {3.5, 2.5, 1e6}};
+  for (const Point3& a : apexes) {
+    for (std::uint64_t seed : {1, 2}) {
+      INFO("apex " << str(a) << ", seed " << seed);
+      std::vector<Point3> pts = grid;
+      shuffle(pts, seed);
+      pdt::Triangulation t;
+      insert_all(t, pts);
+      REQUIRE(t.dimension() == 2);
+      pts.push_back(a);
+      t.insert(a);
+      REQUIRE(t.dimension() == 3);
+      REQUIRE(t.number_of_finite_cells() == triangles);
+      require_valid(t);
+      require_same_as_cgal(t, pts);
+      // A second apex on the other side, then more grid-like points.
+      pts.push_back({a.x, a.y + 0.5, -a.z});
+      t.insert(pts.back());
+      for (int k = 0; k < 10; ++k) {
+        pts.push_back({double(k % 8), double(k % 6), double(k % 3) - 1});
+        t.insert(pts.back());
+      }
+      require_valid(t);
+      require_same_as_cgal(t, pts);
+    }
+  }
+  SECTION("a tilted plane with exact integer points") {
+    // x + y + z = 6 with integer coordinates.
+    std::vector<Point3> pts;
+    for (int x = -4; x <= 6; ++x)
+      for (int y = -4; y <= 6; ++y) pts.push_back({double(x), double(y), double(6 - x - y)});
+    shuffle(pts, 3);
+    pdt::Triangulation t;
+    insert_all(t, pts);
+    REQUIRE(t.dimension() == 2);
+    pts.push_back({0, 0, 0});
+    t.insert(pts.back());
+    REQUIRE(t.dimension() == 3);
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+  }
+}

@@ -1,0 +1,386 @@
+// Operation stream I/O: round trips (text and binary, bit-exact), every
+// malformed-stream case with its line, missing files, and write failures
+// (disk full via /dev/full and a file size limit) leaving nothing behind.
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <catch2/catch.hpp>
+#include <cfloat>
+#include <cmath>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "common/io_test_util.hpp"
+#include "io_util.hpp"
+#include "pdt/ops.hpp"
+
+using pdt_test::catch_error;
+using pdt_test::same_bits;
+using pdt_test::TempDir;
+using pdt_test::write_file;
+
+namespace {
+
+pdt::Operation ins(double x, double y, double z) {
+  pdt::Operation op;
+  op.kind = pdt::Operation::Kind::insert;
+  op.point = {x, y, z};
+  return op;
+}
+pdt::Operation rem(std::uint64_t k) {
+  pdt::Operation op;
+  op.kind = pdt::Operation::Kind::remove;
+  op.target = k;
+  return op;
+}
+
+// Values chosen to break any writer that loses digits or any reader that is
+// not correctly rounded: subnormals, extremes, non-terminating binary
+// fractions, negative zero, halfway-like decimals.
+pdt::OpStream tricky_stream() {
+  pdt::OpStream s;
+  s.box = pdt::Box{{-1.7976931348623157e308, -1e308, -DBL_MAX}, {DBL_MAX, 1e308, 1.7976931348623157e308}};
+  const double denorm_min = std::numeric_limits<double>::denorm_min();
+  s.ops = {ins(denorm_min, -denorm_min, 2.2250738585072009e-308),  // smallest subnormal; largest subnormal
+           ins(1e308, -1e308, DBL_MAX),
+           ins(0.1, 1.0 / 3.0, -0.0),
+           ins(std::nextafter(1.0, 2.0), std::nextafter(1.0, 0.0), 9007199254740993.0),
+           rem(1),
+           ins(123456789.123456789, -2.5e-300, 5e-324),
+           rem(0),
+           ins(0.1, 1.0 / 3.0, -0.0),  // a duplicate point: allowed in a stream
+           rem(3)};
+  return s;
+}
+
+void require_same(const pdt::OpStream& a, const pdt::OpStream& b) {
+  REQUIRE(a.box.has_value() == b.box.has_value());
+  if (a.box) {
+    CHECK(same_bits(a.box->lo, b.box->lo));
+    CHECK(same_bits(a.box->hi, b.box->hi));
+  }
+  REQUIRE(a.ops.size() == b.ops.size());
+  for (std::size_t i = 0; i < a.ops.size(); ++i) {
+    INFO("operation " << i);
+    REQUIRE(a.ops[i].kind == b.ops[i].kind);
+    if (a.ops[i].kind == pdt::Operation::Kind::insert) CHECK(same_bits(a.ops[i].point, b.ops[i].point));
+    else CHECK(a.ops[i].target == b.ops[i].target);
+  }
+}
+
+// The error read_ops gives for `content`, which must be bad_format naming
+// `file:line:` and containing `what`.
+void expect_bad(const std::string& content, int line, const std::string& what) {
+  TempDir d;
+  const std::string p = d.file("bad.ops");
+  write_file(p, content);
+  INFO("stream:\n" << content);
+  auto e = catch_error([&] { pdt::read_ops(p); });
+  REQUIRE(e);
+  INFO("message: " << e->what());
+  CHECK(e->code() == pdt::ErrorCode::bad_format);
+  CHECK(std::string(e->what()).find(p + ":" + std::to_string(line) + ": ") == 0);
+  CHECK(std::string(e->what()).find(what) != std::string::npos);
+}
+
+}  // namespace
+
+TEST_CASE("ops text round trip is bit-exact", "[io]") {
+  TempDir d;
+  const pdt::OpStream s = tricky_stream();
+  const std::string p = d.file("s.ops");
+  pdt::write_ops(p, s);
+  const std::string text = pdt_test::read_file(p);
+  // 17 significant digits, as documented.
+  CHECK(text.find("i 0.10000000000000001 0.33333333333333331 -0\n") != std::string::npos);
+  CHECK(text.find("\nr 1\n") != std::string::npos);
+  CHECK(text.find("\nbox ") != std::string::npos);
+  require_same(s, pdt::read_ops(p));
+  CHECK(d.entries() == 1);  // no temporary file left over
+}
+
+TEST_CASE("ops binary round trip is bit-exact and has the documented layout", "[io]") {
+  TempDir d;
+  const pdt::OpStream s = tricky_stream();
+  const std::string p = d.file("s.opsb");
+  pdt::write_ops(p, s);
+  const std::string bytes = pdt_test::read_file(p);
+  // magic 8 + has_box 1 + box 48 + count 8, then 6 inserts x 25 + 3 removes x 9.
+  REQUIRE(bytes.size() == 65 + 6 * 25 + 3 * 9);
+  CHECK(std::memcmp(bytes.data(), "PDTOPS1\0", 8) == 0);
+  CHECK(bytes[8] == 1);
+  CHECK(static_cast<unsigned char>(bytes[57]) == 9);  // count, little-endian
+  CHECK(bytes[65] == 0);                              // first op: insert
+  require_same(s, pdt::read_ops(p));
+}
+
+TEST_CASE("ops format is chosen by content, not by name", "[io]") {
+  TempDir d;
+  const pdt::OpStream s = tricky_stream();
+  pdt::write_ops(d.file("a.opsb"), s);
+  std::filesystem::rename(d.file("a.opsb"), d.file("a.ops"));  // binary under a text name
+  require_same(s, pdt::read_ops(d.file("a.ops")));
+}
+
+TEST_CASE("ops without a box, empty streams, counts", "[io]") {
+  TempDir d;
+  pdt::OpStream s;
+  s.ops = {ins(1, 2, 3), ins(4, 5, 6), rem(0), ins(7, 8, 9)};
+  CHECK(s.insert_count() == 3);
+  CHECK(s.remove_count() == 1);
+  for (const char* name : {"n.ops", "n.opsb"}) {
+    pdt::write_ops(d.file(name), s);
+    const pdt::OpStream r = pdt::read_ops(d.file(name));
+    CHECK_FALSE(r.box.has_value());
+    require_same(s, r);
+  }
+  pdt::OpStream empty;
+  pdt::write_ops(d.file("e.ops"), empty);
+  pdt::write_ops(d.file("e.opsb"), empty);
+  CHECK(pdt::read_ops(d.file("e.ops")).ops.empty());
+  CHECK(pdt::read_ops(d.file("e.opsb")).ops.empty());
+}
+
+TEST_CASE("ops text accepts comments, blank lines, CRLF, '+' signs and exponents", "[io]") {
+  TempDir d;
+  const std::string p = d.file("ok.ops");
+  write_file(p,
+             "# header comment\r\n"
+             "\r\n"
+             "   box  0 0 0   1 1 1   # the domain\r\n"
+             "i\t+0.5 1e-1 .25\r\n"
+             "i 1 1 1\n"
+             "r 0 # undo\n"
+             "i 0 0 0");  // no final newline
+  const pdt::OpStream s = pdt::read_ops(p);
+  REQUIRE(s.ops.size() == 4);
+  CHECK(s.ops[0].point == pdt::Point3{0.5, 0.1, 0.25});
+  CHECK(s.ops[2].kind == pdt::Operation::Kind::remove);
+  CHECK(s.ops[2].target == 0);
+  CHECK(s.ops[3].point == pdt::Point3{0, 0, 0});
+}
+
+TEST_CASE("malformed text streams are rejected with file and line", "[io]") {
+  SECTION("unknown verb") { expect_bad("i 1 2 3\nx 1 2 3\n", 2, "unknown verb 'x'"); }
+  SECTION("verbs are case-sensitive") { expect_bad("I 1 2 3\n", 1, "unknown verb 'I'"); }
+  SECTION("missing coordinate") { expect_bad("i 1 2\n", 1, "expected 'i x y z'"); }
+  SECTION("extra coordinate") { expect_bad("i 0 0 0\ni 1 2 3 4\n", 2, "expected 'i x y z'"); }
+  SECTION("NaN") { expect_bad("i 0 0 0\ni nan 0 0\n", 2, "not finite"); }
+  SECTION("NaN spelled otherwise") { expect_bad("i 0 NaN 0\n", 1, "not finite"); }
+  SECTION("infinity") { expect_bad("i 0 0 inf\n", 1, "not finite"); }
+  SECTION("negative infinity") { expect_bad("i -infinity 0 0\n", 1, "not finite"); }
+  SECTION("overflow") { expect_bad("# c\ni 1e309 0 0\n", 2, "out of the range"); }
+  SECTION("negative overflow") { expect_bad("i 0 -2e308 0\n", 1, "out of the range"); }
+  SECTION("underflow to zero") { expect_bad("i 0 0 1e-400\n", 1, "out of the range"); }
+  SECTION("decimal comma") { expect_bad("i 1,5 0 0\n", 1, "not a number"); }
+  SECTION("hex float") { expect_bad("i 0x10 0 0\n", 1, "not a number"); }
+  SECTION("trailing garbage") { expect_bad("i 1.0abc 0 0\n", 1, "not a number"); }
+  SECTION("double sign") { expect_bad("i +-1 0 0\n", 1, "not a number"); }
+  SECTION("box after operations") { expect_bad("# c\n\ni 0 0 0\nbox 0 0 0 1 1 1\n", 4, "'box' after operations"); }
+  SECTION("second box") { expect_bad("box 0 0 0 1 1 1\nbox 0 0 0 1 1 1\n", 2, "second 'box'"); }
+  SECTION("box with 5 numbers") { expect_bad("box 0 0 0 1 1\n", 1, "expected 'box x0 y0 z0 x1 y1 z1'"); }
+  SECTION("box with 7 numbers") { expect_bad("box 0 0 0 1 1 1 1\n", 1, "expected 'box x0 y0 z0 x1 y1 z1'"); }
+  SECTION("inverted box") { expect_bad("box 1 0 0 0 1 1\n", 1, "lower corner above"); }
+  SECTION("box with NaN") { expect_bad("box 0 0 0 1 nan 1\n", 1, "not finite"); }
+  SECTION("point outside the box") { expect_bad("box 0 0 0 1 1 1\ni 0.5 0.5 0.5\ni 0.5 1.0000000000000002 0.5\n", 3, "outside the box declared on line 1"); }
+  SECTION("r of an insertion not made yet") { expect_bad("i 0 0 0\nr 1\n", 2, "not been made yet"); }
+  SECTION("r before any insertion") { expect_bad("r 0\n", 1, "not been made yet"); }
+  SECTION("r of an insertion already undone") { expect_bad("i 0 0 0\ni 1 1 1\nr 0\nr 0\n", 4, "already undone"); }
+  SECTION("r with a negative index") { expect_bad("i 0 0 0\nr -1\n", 2, "not a non-negative integer"); }
+  SECTION("r with a fractional index") { expect_bad("i 0 0 0\nr 0.0\n", 2, "not a non-negative integer"); }
+  SECTION("r with a huge index") { expect_bad("i 0 0 0\nr 99999999999999999999999\n", 2, "too large"); }
+  SECTION("r without index") { expect_bad("i 0 0 0\nr\n", 2, "expected 'r k'"); }
+  SECTION("r with two indices") { expect_bad("i 0 0 0\nr 0 0\n", 2, "expected 'r k'"); }
+  SECTION("binary garbage") { expect_bad(std::string("i 0 0 0\n\x01\x02\x03 4\n", 13), 2, "unknown verb '\\x01\\x02\\x03'"); }
+}
+
+TEST_CASE("malformed binary streams are rejected", "[io]") {
+  TempDir d;
+  pdt::OpStream s;
+  s.box = pdt::Box{{0, 0, 0}, {1, 1, 1}};
+  s.ops = {ins(0.5, 0.5, 0.5), ins(0.25, 0.25, 0.25), rem(0)};
+  const std::string good = d.file("good.opsb");
+  pdt::write_ops(good, s);
+  const std::string bytes = pdt_test::read_file(good);
+  REQUIRE(bytes.size() == 65 + 2 * 25 + 9);
+  auto expect = [&](std::string b, const std::string& what) {
+    const std::string p = d.file("bad.opsb");
+    write_file(p, b);
+    auto e = catch_error([&] { pdt::read_ops(p); });
+    REQUIRE(e);
+    INFO(e->what());
+    CHECK(e->code() == pdt::ErrorCode::bad_format);
+    CHECK(std::string(e->what()).find(p + ": ") == 0);
+    CHECK(std::string(e->what()).find(what) != std::string::npos);
+  };
+  SECTION("truncated header") { expect(bytes.substr(0, 40), "ends inside the header"); }
+  SECTION("bad box flag") {
+    std::string b = bytes;
+    b[8] = 2;
+    expect(b, "box flag");
+  }
+  SECTION("count larger than the data") {
+    std::string b = bytes;
+    b[57] = 4;
+    expect(b, "file ends after 3 of the 4 operations");
+  }
+  SECTION("count smaller than the data") {
+    std::string b = bytes;
+    b[57] = 2;
+    expect(b, "extra data");
+  }
+  SECTION("unknown kind") {
+    std::string b = bytes;
+    b[65 + 25] = 7;
+    expect(b, "operation 1 (byte 90): unknown operation kind 7");
+  }
+  SECTION("truncated record") { expect(bytes.substr(0, 65 + 25 + 10), "ends inside an insertion record"); }
+  SECTION("NaN coordinate") {
+    std::string b = bytes;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(&b[65 + 1 + 8], &nan, 8);  // host is little-endian (x86-64, aarch64)
+    expect(b, "NaN or infinite");
+  }
+  SECTION("point outside the box") {
+    std::string b = bytes;
+    const double two = 2.0;
+    std::memcpy(&b[65 + 25 + 1], &two, 8);
+    expect(b, "outside the stream's box");
+  }
+  SECTION("removal of an insertion not made") {
+    std::string b = bytes;
+    b[65 + 50 + 1] = 5;
+    expect(b, "not been made yet");
+  }
+}
+
+TEST_CASE("missing or unreadable ops files give io_failure", "[io]") {
+  TempDir d;
+  auto e = catch_error([&] { pdt::read_ops(d.file("nope.ops")); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::io_failure);
+  CHECK(std::string(e->what()).find(d.file("nope.ops")) != std::string::npos);
+  CHECK(std::string(e->what()).find("No such file or directory") != std::string::npos);
+  auto e2 = catch_error([&] { pdt::read_ops(d.path().string()); });  // a directory
+  REQUIRE(e2);
+  CHECK(e2->code() == pdt::ErrorCode::io_failure);
+  CHECK(std::string(e2->what()).find("Is a directory") != std::string::npos);
+}
+
+TEST_CASE("write_ops refuses streams read_ops would reject, writing nothing", "[io]") {
+  TempDir d;
+  pdt::OpStream s;
+  s.ops = {ins(0, std::numeric_limits<double>::quiet_NaN(), 0)};
+  auto e = catch_error([&] { pdt::write_ops(d.file("x.ops"), s); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  s.ops = {ins(0, 0, 0), rem(1)};
+  auto e2 = catch_error([&] { pdt::write_ops(d.file("x.ops"), s); });
+  REQUIRE(e2);
+  CHECK(e2->code() == pdt::ErrorCode::invalid_argument);
+  s.box = pdt::Box{{1, 1, 1}, {2, 2, 2}};
+  s.ops = {ins(0, 0, 0)};
+  auto e3 = catch_error([&] { pdt::write_ops(d.file("x.opsb"), s); });
+  REQUIRE(e3);
+  CHECK(e3->code() == pdt::ErrorCode::invalid_argument);
+  CHECK(d.entries() == 0);
+}
+
+TEST_CASE("write_ops into a missing directory names the path", "[io]") {
+  TempDir d;
+  const std::string p = d.file("no/such/dir/x.ops");
+  auto e = catch_error([&] { pdt::write_ops(p, pdt::OpStream{}); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::io_failure);
+  CHECK(std::string(e->what()).find(p) != std::string::npos);
+  CHECK(std::string(e->what()).find("No such file or directory") != std::string::npos);
+}
+
+TEST_CASE("write_ops replaces an existing file atomically", "[io]") {
+  TempDir d;
+  const std::string p = d.file("x.ops");
+  write_file(p, "old content that is not a stream\n");
+  pdt::OpStream s;
+  s.ops = {ins(1, 2, 3)};
+  pdt::write_ops(p, s);
+  CHECK(pdt::read_ops(p).ops.size() == 1);
+  CHECK(d.entries() == 1);
+}
+
+TEST_CASE("a full disk gives io_failure 'No space left on device'", "[io]") {
+  // The checked writer every pdt writer goes through, on /dev/full (every
+  // write fails with ENOSPC). The public writers cannot target /dev/full
+  // themselves: they create a temporary file beside the target.
+  const int fd = ::open("/dev/full", O_WRONLY | O_CLOEXEC);
+  if (fd < 0) {
+    WARN("/dev/full not available; skipping");
+    return;
+  }
+  auto e = catch_error([&] {
+    pdt::detail::FdWriter w(fd, "/dev/full");
+    const std::string chunk(4096, 'x');
+    for (int i = 0; i < 1024; ++i) w.put(chunk);  // 4 MiB: more than the buffer holds
+    w.flush();
+  });
+  ::close(fd);
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::io_failure);
+  CHECK(std::string(e->what()) == "cannot write '/dev/full': No space left on device");
+}
+
+TEST_CASE("a write failure in write_ops leaves no file behind", "[io]") {
+  // A file-size limit makes write(2) fail (EFBIG) part way through, through
+  // the public writer: it must throw io_failure and remove its temporary file.
+  TempDir d;
+  pdt::OpStream s;
+  for (int i = 0; i < 200000; ++i) s.ops.push_back(ins(i * 0.1, i * 0.2, i * 0.3));
+  struct rlimit old {};
+  REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
+  auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // fail with EFBIG instead of killing us
+  struct rlimit lim = old;
+  lim.rlim_cur = 64 * 1024;
+  REQUIRE(::setrlimit(RLIMIT_FSIZE, &lim) == 0);
+  auto e1 = catch_error([&] { pdt::write_ops(d.file("big.ops"), s); });
+  auto e2 = catch_error([&] { pdt::write_ops(d.file("big.opsb"), s); });
+  ::setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, old_handler);
+  for (auto* e : {&e1, &e2}) {
+    REQUIRE(*e);
+    INFO((*e)->what());
+    CHECK((*e)->code() == pdt::ErrorCode::io_failure);
+    CHECK(std::string((*e)->what()).find("File too large") != std::string::npos);
+  }
+  CHECK(std::string(e1->what()).find(d.file("big.ops")) != std::string::npos);
+  CHECK(d.entries() == 0);  // neither the target nor a temporary file
+}
+
+TEST_CASE("number parsing helpers are exact and strict", "[io]") {
+  using pdt::detail::NumStatus;
+  double v = 0;
+  CHECK(pdt::detail::parse_double("4.9406564584124654e-324", v) == NumStatus::ok);
+  CHECK(same_bits(v, std::numeric_limits<double>::denorm_min()));
+  CHECK(pdt::detail::parse_double("0.1", v) == NumStatus::ok);
+  CHECK(same_bits(v, 0.1));
+  CHECK(pdt::detail::parse_double("1.7976931348623157e308", v) == NumStatus::ok);
+  CHECK(v == DBL_MAX);
+  CHECK(pdt::detail::parse_double("1.7976931348623159e308", v) == NumStatus::out_of_range);
+  CHECK(pdt::detail::parse_double("", v) == NumStatus::not_a_number);
+  CHECK(pdt::detail::parse_double("+", v) == NumStatus::not_a_number);
+  CHECK(pdt::detail::parse_double("1e", v) == NumStatus::not_a_number);
+  std::uint64_t k = 0;
+  CHECK(pdt::detail::parse_u64("18446744073709551615", k) == NumStatus::ok);
+  CHECK(k == 18446744073709551615ull);
+  CHECK(pdt::detail::parse_u64("18446744073709551616", k) == NumStatus::out_of_range);
+  CHECK(pdt::detail::parse_u64("+1", k) == NumStatus::not_a_number);
+  std::string s;
+  pdt::detail::append_double(s, 0.1);
+  CHECK(s == "0.10000000000000001");
+  s.clear();
+  pdt::detail::append_double(s, 1e308);
+  CHECK(s == "1e+308");
+}

@@ -18,8 +18,10 @@
 // `world_stop` and waits until no other worker is inside an operation.
 #include "pdt/engine.hpp"
 
-#include <oneapi/tbb/concurrent_queue.h>
 #include <oneapi/tbb/concurrent_vector.h>
+
+#include <boost/lockfree/queue.hpp>
+#include <boost/lockfree/stack.hpp>
 #include <oneapi/tbb/task_group.h>
 
 #include <algorithm>
@@ -77,7 +79,9 @@ enum WorkerPhase : int { idle = 0, running = 1, sleeping = 2 };
 struct alignas(64) Worker {
   unsigned index = 0;
   std::unique_ptr<OpContext> ctx;
-  tbb::concurrent_queue<QueuedOp> queue;
+  // Boost.Lockfree over oneTBB's concurrent_queue: 2x the throughput with one
+  // producer and far better when threads outnumber cores (bench_queues).
+  boost::lockfree::queue<QueuedOp*> queue{256};
   std::atomic<int> phase{idle};
   std::atomic<bool> in_op{false};
   std::coroutine_handle<> handle;
@@ -110,18 +114,25 @@ struct EngineState {
   std::mutex global_mutex;
   std::atomic<bool> world_stop{false};
   std::atomic<std::uint64_t> global_ops{0};
+  // Operation records: recycled through a lock-free free list, allocated in
+  // slabs, so submitting allocates nothing once warm.
+  boost::lockfree::stack<QueuedOp*> free_ops{1024};
+  std::mutex slab_mutex;
+  std::vector<std::unique_ptr<QueuedOp[]>> slabs;
+  QueuedOp* acquire_op();
+  void release_op(QueuedOp* op);
 
   template <class F>
   void spawn(F&& f) {
     arena->execute([&] { tasks.run(std::forward<F>(f)); });
   }
   Worker& owner_of(const Point3& p);
-  void submit(QueuedOp&& op);
+  void submit(QueuedOp* op);
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
   bool wake_one();
-  void execute(Worker& w, QueuedOp& op);
-  void run_global(Worker& w, QueuedOp& op);
-  void complete(Worker& w, QueuedOp& op, OpResult& r, std::uint64_t stamp);
+  void execute(Worker& w, QueuedOp* op);
+  void run_global(Worker& w, QueuedOp* op);
+  void complete(Worker& w, QueuedOp* op, OpResult& r, std::uint64_t stamp);
   void judge(Worker& w, bool* want_sleep);
   void ensure_grid();
   WorkerCoroutine body(Worker& w);
@@ -176,8 +187,8 @@ struct SleepAwait {
 
 WorkerCoroutine EngineState::body(Worker& w) {
   for (;;) {
-    QueuedOp op;
-    while (w.queue.try_pop(op)) {
+    QueuedOp* op = nullptr;
+    while (w.queue.pop(op)) {
       execute(w, op);
       bool want_sleep = false;
       judge(w, &want_sleep);
@@ -254,10 +265,27 @@ void EngineState::resume(Worker& w) {
   spawn([h] { h.resume(); });
 }
 
-void EngineState::submit(QueuedOp&& op) {
+QueuedOp* EngineState::acquire_op() {
+  QueuedOp* op = nullptr;
+  if (free_ops.pop(op)) return op;
+  constexpr std::size_t slab = 4096;
+  std::lock_guard lock(slab_mutex);
+  slabs.push_back(std::make_unique<QueuedOp[]>(slab));
+  QueuedOp* s = slabs.back().get();
+  for (std::size_t i = 1; i < slab; ++i) free_ops.push(&s[i]);
+  return &s[0];
+}
+
+void EngineState::release_op(QueuedOp* op) {
+  op->done = nullptr;
+  op->awaiter = nullptr;
+  free_ops.push(op);
+}
+
+void EngineState::submit(QueuedOp* op) {
   pending.fetch_add(1, std::memory_order_relaxed);
-  Worker& w = owner_of(op.point);
-  w.queue.push(std::move(op));
+  Worker& w = owner_of(op->point);
+  w.queue.push(op);
   int expect = idle;
   if (w.phase.compare_exchange_strong(expect, running)) {
     resume(w);
@@ -302,7 +330,8 @@ void EngineState::judge(Worker& w, bool* want_sleep) {
     wake_one();
 }
 
-void EngineState::execute(Worker& w, QueuedOp& op) {
+void EngineState::execute(Worker& w, QueuedOp* opp) {
+  QueuedOp& op = *opp;
   // Enter an operation unless the world is stopped (see run_global).
   w.in_op.store(true, std::memory_order_seq_cst);
   while (world_stop.load(std::memory_order_seq_cst)) {
@@ -333,7 +362,7 @@ void EngineState::execute(Worker& w, QueuedOp& op) {
         if (st == 0) {  // the insertion it undoes is not done yet
           w.in_op.store(false, std::memory_order_release);
           w.deferred.fetch_add(1, std::memory_order_relaxed);
-          w.queue.push(std::move(op));
+          w.queue.push(opp);
           return;
         }
         if (st == 2) throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(op.ticket) +
@@ -350,22 +379,23 @@ void EngineState::execute(Worker& w, QueuedOp& op) {
   w.in_op.store(false, std::memory_order_seq_cst);
   if (s == OpStatus::rollback) {
     w.rollbacks.fetch_add(1, std::memory_order_relaxed);
-    w.queue.push(std::move(op));
+    w.queue.push(opp);
     return;
   }
   if (s == OpStatus::needs_global) {
-    run_global(w, op);
+    run_global(w, opp);
     return;
   }
   ++w.window_completed;
-  complete(w, op, r, stamp);
+  complete(w, opp, r, stamp);
 }
 
-void EngineState::run_global(Worker& w, QueuedOp& op) {
+void EngineState::run_global(Worker& w, QueuedOp* opp) {
+  QueuedOp& op = *opp;
   std::unique_lock lock(global_mutex, std::try_to_lock);
   if (!lock.owns_lock()) {  // another worker is stopping the world: retry later
     w.rollbacks.fetch_add(1, std::memory_order_relaxed);
-    w.queue.push(std::move(op));
+    w.queue.push(opp);
     return;
   }
   world_stop.store(true, std::memory_order_seq_cst);
@@ -395,10 +425,11 @@ void EngineState::run_global(Worker& w, QueuedOp& op) {
   world_stop.store(false, std::memory_order_seq_cst);
   lock.unlock();
   ++w.window_completed;
-  complete(w, op, r, stamp);
+  complete(w, opp, r, stamp);
 }
 
-void EngineState::complete(Worker& w, QueuedOp& op, OpResult& r, std::uint64_t stamp) {
+void EngineState::complete(Worker& w, QueuedOp* opp, OpResult& r, std::uint64_t stamp) {
+  QueuedOp& op = *opp;
   if (op.kind == OpKind::insert) {
     TicketSlot& slot = tickets[op.ticket];
     if (r.error) {
@@ -417,6 +448,7 @@ void EngineState::complete(Worker& w, QueuedOp& op, OpResult& r, std::uint64_t s
     std::coroutine_handle<> h = a->waiter;  // `a` may be gone once h resumes
     spawn([h] { h.resume(); });
   }
+  release_op(opp);
   pending.fetch_sub(1, std::memory_order_acq_rel);
 }
 
@@ -543,13 +575,13 @@ bool InsertAwaitable::await_suspend(std::coroutine_handle<> h) {
     result.error = std::current_exception();
     return false;
   }
-  QueuedOp op;
+  QueuedOp& op = *e.acquire_op();
   op.kind = OpKind::insert;
   op.point = point_;
   op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
   e.tickets[op.ticket].point = point_;
   op.awaiter = this;
-  e.submit(std::move(op));  // from here on `this` may already be resumed and gone
+  e.submit(&op);  // from here on `this` may already be resumed and gone
   return true;
 }
 
@@ -567,14 +599,14 @@ bool RemoveAwaitable::await_suspend(std::coroutine_handle<> h) {
         ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(vertex_) + ": it is not in the triangulation"));
     return false;
   }
-  QueuedOp op;
+  QueuedOp& op = *e.acquire_op();
   op.kind = OpKind::remove;
   op.vertex = vertex_;
   op.stamp = m.verts[vertex_].stamp;
   const auto& p = m.verts[vertex_].p;
   op.point = {p.x(), p.y(), p.z()};
   op.awaiter = this;
-  e.submit(std::move(op));
+  e.submit(&op);
   return true;
 }
 
@@ -586,14 +618,14 @@ RemoveResult RemoveAwaitable::await_resume() {
 Engine::Ticket Engine::insert(const Point3& p, Callback done) {
   EngineState& e = *state_;
   e.check_point(p);
-  QueuedOp op;
+  QueuedOp& op = *e.acquire_op();
   op.kind = OpKind::insert;
   op.point = p;
   op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
   e.tickets[op.ticket].point = p;
   op.done = std::move(done);
   Ticket t = op.ticket;
-  e.submit(std::move(op));
+  e.submit(&op);
   return t;
 }
 
@@ -602,14 +634,14 @@ void Engine::remove(VertexId v, Callback done) {
   const auto& m = e.impl;
   if (v == 0 || v >= m.verts.size() || m.verts[v].multiplicity == 0)
     throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
-  QueuedOp op;
+  QueuedOp& op = *e.acquire_op();
   op.kind = OpKind::remove;
   op.vertex = v;
   op.stamp = m.verts[v].stamp;
   const auto& p = m.verts[v].p;
   op.point = {p.x(), p.y(), p.z()};
   op.done = std::move(done);
-  e.submit(std::move(op));
+  e.submit(&op);
 }
 
 void Engine::remove_insertion(Ticket t, Callback done) {
@@ -618,12 +650,12 @@ void Engine::remove_insertion(Ticket t, Callback done) {
     throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": no such insertion was submitted");
   if (e.tickets[t].undone.exchange(true))
     throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": it was already undone");
-  QueuedOp op;
+  QueuedOp& op = *e.acquire_op();
   op.kind = OpKind::remove_insertion;
   op.ticket = t;
   op.point = e.tickets[t].point;
   op.done = std::move(done);
-  e.submit(std::move(op));
+  e.submit(&op);
 }
 
 void Engine::drain() {

@@ -1,24 +1,40 @@
 #pragma once
-// StableArray<T>: a growable array whose elements never move.
+// StableArray<T>: a growable array whose elements never move, in two builds
+// (CMake option PDT_ALLOCATOR), compared by the benchmarks:
 //
-// It reserves a large range of virtual addresses once (mmap, no backing store)
-// and lets the OS commit pages as they are first touched, so growing never
-// copies and never invalidates an index or a pointer, and it costs no memory
-// for what is not used. That is what lets ids stay valid while storage grows,
-// and lets worker threads read elements while another thread appends.
+//  pool (default): one large range of virtual addresses is reserved once
+//    (mmap, no backing store) and the OS commits pages as they are first
+//    touched. Indexing is one add; the kernel's per-thread pools carve it into
+//    chunks of 12 pages (cells) and 3 pages (vertices), as in paper §3.2.
+//  mimalloc: the elements live in fixed-size chunks allocated from mimalloc's
+//    thread-local heap of the thread that grows the array (so a worker's
+//    cells come from its own heap); a chunk table maps an index to its chunk.
+//    Indexing is one extra dependent load.
 //
-// Invariant: size() <= capacity(); elements [0, size()) were constructed.
+// Either way growing never copies and never invalidates an index or a
+// pointer, so ids stay valid while storage grows and worker threads can read
+// elements while another thread appends.
+//
+// Invariant: size() <= capacity(); elements [0, size()) were constructed by
+// grow(). ensure_size() extends the size without constructing: its users
+// (the cell marks) never read an element before writing it. clear(false)
+// keeps the memory, and its old contents, for reuse.
 // T must be trivially destructible (storage is released without destructors).
 #include <sys/mman.h>
 
 #include <atomic>
 #include <cstddef>
+#include <cstring>
 #include <new>
 #include <type_traits>
 
-#include "pdt/error.hpp"
+#ifdef PDT_USE_MIMALLOC
+#include <mimalloc.h>
+#endif
 
 namespace pdt::detail {
+
+#ifndef PDT_USE_MIMALLOC
 
 template <class T>
 class StableArray {
@@ -38,23 +54,26 @@ class StableArray {
 
   T& operator[](std::size_t i) { return data_[i]; }
   const T& operator[](std::size_t i) const { return data_[i]; }
-  T* data() { return data_; }
   std::size_t size() const { return size_.load(std::memory_order_acquire); }
   std::size_t capacity() const { return capacity_; }
 
-  // Appends `count` default-constructed elements and returns the index of the
-  // first. Safe to call from several threads at once.
-  std::size_t grow(std::size_t count) {
+  // Appends `count` elements and returns the index of the first. Safe to call
+  // from several threads at once. construct = false leaves them as fresh
+  // memory, all-zero unless clear(false) recycled it: the size grows before
+  // the elements exist, so a thread that may touch an element it found below
+  // size() (the engine's random vertex probes lock it) must not race with a
+  // constructor that resets it.
+  std::size_t grow(std::size_t count, bool construct = true) {
     std::size_t first = size_.fetch_add(count, std::memory_order_acq_rel);
     if (first + count > capacity_) {
       size_.fetch_sub(count, std::memory_order_acq_rel);
       throw std::bad_alloc();
     }
-    for (std::size_t i = first; i < first + count; ++i) new (&data_[i]) T();
+    if (construct)
+      for (std::size_t i = first; i < first + count; ++i) new (&data_[i]) T();
     return first;
   }
-  // Makes size() at least n without constructing anything: for arrays whose
-  // elements are all-zero when fresh (mmap'd pages are). Thread-safe.
+  // Makes size() at least n without constructing anything. Thread-safe.
   void ensure_size(std::size_t n) {
     if (n > capacity_) throw std::bad_alloc();
     std::size_t cur = size_.load(std::memory_order_acquire);
@@ -74,5 +93,86 @@ class StableArray {
   std::size_t capacity_;
   std::atomic<std::size_t> size_{0};
 };
+
+#else  // PDT_USE_MIMALLOC
+
+template <class T>
+class StableArray {
+  static_assert(std::is_trivially_destructible_v<T>);
+  static constexpr std::size_t chunk_bits = 11;  // 2048 elements per chunk
+  static constexpr std::size_t chunk_elems = std::size_t{1} << chunk_bits;
+
+ public:
+  explicit StableArray(std::size_t max_elements)
+      : capacity_(max_elements), table_size_((max_elements + chunk_elems - 1) / chunk_elems) {
+    // The table itself is reserved like the pool build's storage: untouched
+    // entries cost nothing and read as null.
+    void* p = ::mmap(nullptr, table_bytes(), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    table_ = static_cast<std::atomic<T*>*>(p);
+  }
+  ~StableArray() {
+    release_chunks();
+    if (table_) ::munmap(table_, table_bytes());
+  }
+  StableArray(const StableArray&) = delete;
+  StableArray& operator=(const StableArray&) = delete;
+
+  T& operator[](std::size_t i) { return table_[i >> chunk_bits].load(std::memory_order_relaxed)[i & (chunk_elems - 1)]; }
+  const T& operator[](std::size_t i) const {
+    return table_[i >> chunk_bits].load(std::memory_order_relaxed)[i & (chunk_elems - 1)];
+  }
+  std::size_t size() const { return size_.load(std::memory_order_acquire); }
+  std::size_t capacity() const { return capacity_; }
+
+  std::size_t grow(std::size_t count, bool construct = true) {  // see the pool build
+    std::size_t first = size_.fetch_add(count, std::memory_order_acq_rel);
+    if (first + count > capacity_) {
+      size_.fetch_sub(count, std::memory_order_acq_rel);
+      throw std::bad_alloc();
+    }
+    cover(first, first + count);
+    if (construct)
+      for (std::size_t i = first; i < first + count; ++i) new (&(*this)[i]) T();
+    return first;
+  }
+  void ensure_size(std::size_t n) {
+    if (n > capacity_) throw std::bad_alloc();
+    std::size_t cur = size_.load(std::memory_order_acquire);
+    while (cur < n && !size_.compare_exchange_weak(cur, n, std::memory_order_acq_rel)) {
+    }
+    cover(0, n);
+  }
+  void clear(bool release = true) {
+    size_.exchange(0);
+    if (release) release_chunks();
+  }
+
+ private:
+  std::size_t table_bytes() const { return table_size_ * sizeof(std::atomic<T*>); }
+  // Allocates the chunks holding [from, to) that do not exist yet, zeroed, on
+  // the calling thread's mimalloc heap. Two threads racing for one chunk: the
+  // loser frees its copy.
+  void cover(std::size_t from, std::size_t to) {
+    if (from >= to) return;
+    for (std::size_t c = from >> chunk_bits; c <= (to - 1) >> chunk_bits; ++c) {
+      if (table_[c].load(std::memory_order_acquire)) continue;
+      T* fresh = static_cast<T*>(mi_zalloc_aligned(chunk_elems * sizeof(T), alignof(T) < 64 ? 64 : alignof(T)));
+      if (!fresh) throw std::bad_alloc();
+      T* expected = nullptr;
+      if (!table_[c].compare_exchange_strong(expected, fresh, std::memory_order_acq_rel)) mi_free(fresh);
+    }
+  }
+  void release_chunks() {
+    for (std::size_t c = 0; c < table_size_; ++c)
+      if (T* p = table_[c].exchange(nullptr, std::memory_order_relaxed)) mi_free(p);
+  }
+  std::size_t capacity_;
+  std::size_t table_size_;
+  std::atomic<T*>* table_ = nullptr;
+  std::atomic<std::size_t> size_{0};
+};
+
+#endif
 
 }  // namespace pdt::detail

@@ -66,6 +66,15 @@ std::uint64_t triple_key(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
 // ---------------------------------------------------------------------------
 namespace detail {
 
+namespace {
+// Fibonacci hashing: the table size is a power of two; the high bits of the
+// product are well mixed, so fold them down.
+inline std::size_t slot_hash(std::uint64_t key, std::size_t mask) {
+  std::uint64_t h = key * 0x9E3779B97F4A7C15ull;
+  return static_cast<std::size_t>(h ^ (h >> 32)) & mask;
+}
+}  // namespace
+
 void IdMap::reserve_for(std::size_t entries) {
   std::size_t want = 16;
   while (want < 2 * entries) want <<= 1;
@@ -93,7 +102,7 @@ std::uint32_t IdMap::get_or_insert(std::uint64_t key, std::uint32_t value, bool*
     used_.clear();
     for (auto& [k, v] : old) get_or_insert(k, v);
   }
-  std::size_t s = mix64(key) & mask_;
+  std::size_t s = slot_hash(key, mask_);
   while (true) {
     if (keys_[s] == key) {
       if (inserted) *inserted = false;
@@ -112,7 +121,7 @@ std::uint32_t IdMap::get_or_insert(std::uint64_t key, std::uint32_t value, bool*
 
 std::uint32_t IdMap::find(std::uint64_t key) const {
   if (keys_.empty()) return no_index;
-  std::size_t s = mix64(key) & mask_;
+  std::size_t s = slot_hash(key, mask_);
   while (true) {
     if (keys_[s] == key) return values_[s];
     if (keys_[s] == ~std::uint64_t{0}) return no_index;
@@ -188,21 +197,33 @@ void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
 }
 
 VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
+  // Any free id may be held shared by a reader that found it (a stale
+  // jump-grid slot, a random probe) and is checking whether it is alive. We
+  // write a vertex only once we hold it, so an id we cannot lock is skipped
+  // (a fresh one goes to our free list for later).
   VertexId v = no_vertex;
-  // A recycled id may still be named by a jump-grid slot, so a reader may hold
-  // its lock; then take a fresh id instead (never named anywhere yet).
   if (ctx.free_vertices.head != no_index && lock_exclusive(ctx, ctx.free_vertices.head)) {
     v = ctx.free_vertices.head;
     ctx.free_vertices.head = verts[v].cell;
     if (--ctx.free_vertices.count == 0) ctx.free_vertices.tail = no_index;
-  } else {
+  }
+  while (v == no_vertex) {
     if (ctx.fresh_vertex == ctx.fresh_vertex_end) {
-      std::size_t first = verts.grow(vertex_chunk);
+      // Fresh records are all-zero (a free vertex) without construction; see
+      // StableArray::grow. The small triangulation reuses its memory, and is
+      // single-threaded, so it constructs.
+      std::size_t first = verts.grow(vertex_chunk, is_small);
       ctx.fresh_vertex = static_cast<std::uint32_t>(first);
       ctx.fresh_vertex_end = static_cast<std::uint32_t>(first + vertex_chunk);
     }
-    v = ctx.fresh_vertex++;
-    lock_exclusive(ctx, v);  // cannot fail: nobody knows this id yet
+    VertexId f = ctx.fresh_vertex++;
+    if (lock_exclusive(ctx, f)) {
+      v = f;
+    } else {
+      verts[f].cell = ctx.free_vertices.head;  // the prober only reads multiplicity (0)
+      if (ctx.free_vertices.count++ == 0) ctx.free_vertices.tail = f;
+      ctx.free_vertices.head = f;
+    }
   }
   VertexRec& r = verts[v];
   r.p = p;
@@ -789,20 +810,23 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
 }
 
 void Triangulation::Impl::collect_incident_cells(OpContext& ctx, VertexId v, std::vector<CellId>& out) {
-  const std::uint64_t seen = ctx.next_stamp();
+  // The visited set is the context's own, not `marks`: holding v keeps these
+  // cells from changing, but not from being marked by an insertion next door
+  // that holds a facet of one of them (opposite v) and tests it for conflict.
+  detail::IdMap& seen = ctx.visited;
+  seen.clear();
   out.clear();
   CellId c0 = verts[v].cell;
-  marks[c0] = seen;
+  seen.get_or_insert(c0, 0);
   out.push_back(c0);
   for (std::size_t idx = 0; idx < out.size(); ++idx) {
     CellId c = out[idx];
     for (int i = 0; i < 4; ++i) {
       if (cells[c].v[i] == v) continue;
       CellId nb = cells[c].n[i] >> 2;  // facet i contains v
-      if (marks[nb] != seen) {
-        marks[nb] = seen;
-        out.push_back(nb);
-      }
+      bool inserted = false;
+      seen.get_or_insert(nb, 0, &inserted);
+      if (inserted) out.push_back(nb);
     }
   }
 }

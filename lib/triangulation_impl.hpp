@@ -6,9 +6,12 @@
 //   cells[c].n[i]  4 * d + j: cell d shares c's facet i (the facet opposite
 //                  v[i]) and that facet is d's facet j. So following an
 //                  adjacency and finding the mirror facet is one load.
-//   marks[c]       visit stamp of the last traversal that touched c. A stamp is
-//                  (context id << 48 | counter), so traversals of different
+//   marks[c]       visit stamp of the last cavity search that touched c. A stamp
+//                  is (context id << 48 | counter), so searches of different
 //                  threads, or earlier ones of the same thread, never match.
+//                  Only a thread holding a facet of c exclusively writes marks[c]
+//                  (two such threads would share a vertex), so a cavity search
+//                  owns the marks it reads.
 //   verts[v]       point, one incident cell, multiplicity, lock word, stamp.
 //
 // Invariants while dimension() == 3 (checked by validate()):
@@ -162,6 +165,7 @@ struct OpContext {
   std::vector<CellId> cavity;
   std::vector<BoundaryFacet> boundary;
   detail::IdMap facet_map;
+  detail::IdMap visited;             // cells met by collect_incident_cells
   std::vector<VertexId> link;        // finite vertices of a hole but v, in small-id order
   detail::IdMap link_index;          // big id -> small id (0 for the infinite vertex)
   std::vector<std::uint32_t> small_facet_bf;

@@ -162,11 +162,14 @@ TEST_CASE("pdt gen, run and check work end to end", "[cli]") {
   CHECK(r.code == 1);
   CHECK(r.out.find("INVALID") != std::string::npos);
 
-  // --threads other than 1: accepted, with a note, same result.
-  r = run_pdt(d, "run '" + ops + "' --threads 4 --out '" + d.file("m.vtu") + "'");
+  // --threads N: the parallel engine with N workers, same result, statistics shown.
+  r = run_pdt(d, "run '" + ops + "' --threads 4 --validate --out '" + d.file("m.vtu") + "'");
+  INFO("stdout:\n" << r.out << "\nstderr:\n" << r.err);
   CHECK(r.code == 0);
-  CHECK(r.err.find("note: the parallel engine is not available yet") != std::string::npos);
+  CHECK(r.out.find("4 (parallel engine") != std::string::npos);
   CHECK(r.out.find("vertices         1,500\n") != std::string::npos);
+  CHECK(r.out.find("workers          4,500 completed") != std::string::npos);
+  CHECK(r.out.find("validate         ok") != std::string::npos);
   CHECK(std::filesystem::exists(d.file("m.vtu")));
 
   // Duplicates are counted, not fatal; removals lower the multiplicity.

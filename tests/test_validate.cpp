@@ -13,8 +13,6 @@ using pdt::Point3;
 
 namespace {
 
-bool valid(const pdt::Triangulation& t, std::string* why = nullptr) { return t.validate(why); }
-
 // REQUIREs validate() false with a non-empty message (and false without one too).
 void require_invalid(const pdt::Triangulation& t) {
   std::string why;

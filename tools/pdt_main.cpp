@@ -5,8 +5,12 @@
 // `run --validate` found a broken triangulation); 2 usage error or any failure
 // (bad input, I/O). Every failure is one "pdt: ..." line on stderr; nothing
 // escapes as an uncaught exception.
+#include <oneapi/tbb/task_arena.h>
+
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -63,7 +67,9 @@ const char* const kRunUsage =
     "file order).\n"
     "\n"
     "options:\n"
-    "  --threads N     worker threads (default 1; 0 = all cores)\n"
+    "  --threads N     run on the parallel engine with N workers in a TBB arena of N threads\n"
+    "                  (0 = all cores); without it the sequential kernel replays the stream.\n"
+    "                  The engine's other settings come from PDT_* variables (see README)\n"
     "  --out FILE      write the final mesh: FILE.node (TetGen .node + .ele) or FILE.vtu (VTK)\n"
     "  --validate      check every invariant of the final triangulation (exit 1 if broken)\n";
 
@@ -212,24 +218,114 @@ int cmd_gen(Args args) {
 
 struct ReplayStats {
   std::uint64_t insertions = 0, duplicates = 0, removals = 0, multiplicity_lowered = 0;
-  double insert_seconds = 0, remove_seconds = 0;
+  double insert_seconds = 0, remove_seconds = 0, mixed_seconds = 0;
   unsigned threads_used = 1;
+  bool engine = false;
+  pdt::EngineStats engine_stats;
+  unsigned blocks_per_axis = 0;
 };
+
+// The domain an engine needs: the stream's box, or the points' bounding box.
+pdt::Box stream_box(const pdt::OpStream& s) {
+  if (s.box) return *s.box;
+  pdt::Box b{{HUGE_VAL, HUGE_VAL, HUGE_VAL}, {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL}};
+  for (const pdt::Operation& op : s.ops) {
+    if (op.kind != pdt::Operation::Kind::insert) continue;
+    b.lo = {std::min(b.lo.x, op.point.x), std::min(b.lo.y, op.point.y), std::min(b.lo.z, op.point.z)};
+    b.hi = {std::max(b.hi.x, op.point.x), std::max(b.hi.y, op.point.y), std::max(b.hi.z, op.point.z)};
+  }
+  if (b.lo.x > b.hi.x) b = pdt::Box{};  // no insertion at all
+  return b;
+}
+
+// Replays a stream on the parallel engine: insertion k is the engine's ticket
+// k, and 'r k' is remove_insertion(k), which waits for insertion k by itself,
+// so the stream is submitted without barriers. A stream that switches between
+// inserting and removing at most twice (the paper's "insert all, then remove")
+// is drained at each switch, to time the phases apart; otherwise the whole
+// run is timed as one mixed phase.
+ReplayStats replay_engine(const pdt::OpStream& s, unsigned threads, pdt::Triangulation& t) {
+  using Kind = pdt::Operation::Kind;
+  ReplayStats st;
+  st.engine = true;
+  std::size_t switches = 0;
+  for (std::size_t i = 1; i < s.ops.size(); ++i) switches += s.ops[i].kind != s.ops[i - 1].kind;
+  const bool phased = switches <= 2;
+  std::atomic<std::uint64_t> duplicates{0}, lowered{0}, failures{0};
+  std::string first_error;
+  std::atomic<bool> have_error{false};
+  auto on_done = [&](const pdt::OpResult& r) {
+    if (r.error) {
+      failures.fetch_add(1);
+      if (!have_error.exchange(true)) {
+        try {
+          std::rethrow_exception(r.error);
+        } catch (const std::exception& e) {
+          first_error = e.what();
+        }
+      }
+      return;
+    }
+    if (!r.insert.inserted && r.insert.vertex != pdt::no_vertex) duplicates.fetch_add(1, std::memory_order_relaxed);
+    if (r.remove == pdt::RemoveResult::multiplicity_lowered) lowered.fetch_add(1, std::memory_order_relaxed);
+  };
+  auto on_insert = [&](const pdt::OpResult& r) { on_done(r); };
+  auto on_remove = [&](const pdt::OpResult& r) {
+    pdt::OpResult copy;
+    copy.error = r.error;
+    copy.remove = r.remove;
+    on_done(copy);
+  };
+  pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
+  opts.threads = threads;
+  // Workers are coroutines, not threads: N workers run in an arena no wider
+  // than the machine, so --threads 16 on 2 cores still exercises 16 workers.
+  tbb::task_arena arena(static_cast<int>(std::min(threads, std::max(1u, std::thread::hardware_concurrency()))));
+  pdt::detail::ProgressBar bar("replaying", s.ops.size());
+  arena.execute([&] {
+    pdt::Engine engine(t, stream_box(s), opts);
+    pdt::detail::Stopwatch phase;
+    std::optional<Kind> current;
+    auto close_phase = [&] {
+      if (!current) return;
+      engine.drain();
+      (phased ? (*current == Kind::insert ? st.insert_seconds : st.remove_seconds) : st.mixed_seconds) +=
+          phase.seconds();
+      phase.restart();
+    };
+    for (std::size_t i = 0; i < s.ops.size(); ++i) {
+      const pdt::Operation& op = s.ops[i];
+      if (phased && current && op.kind != *current) close_phase();
+      current = op.kind;
+      if (op.kind == Kind::insert) {
+        engine.insert(op.point, on_insert);
+        ++st.insertions;
+      } else {
+        engine.remove_insertion(op.target, on_remove);
+        ++st.removals;
+      }
+      if ((i & 1023) == 0) bar.update(i + 1);
+    }
+    close_phase();
+    st.engine_stats = engine.stats();
+    st.threads_used = engine.threads();
+    st.blocks_per_axis = engine.blocks_per_axis();
+  });
+  bar.finish();
+  if (failures.load())
+    throw pdt::Error(pdt::ErrorCode::invalid_argument,
+                     std::to_string(failures.load()) + " operation(s) failed on the engine; the first: " + first_error);
+  st.duplicates = duplicates.load();
+  st.multiplicity_lowered = lowered.load();
+  return st;
+}
 
 // Replays a validated stream (read_ops checked every 'r k' and the box).
 // vertex_of[k] is the vertex insertion k produced (or found, for a duplicate);
 // the kernel keeps multiplicities, so 'r k' is always remove(vertex_of[k]).
 // Time is split by runs of same-kind operations: one clock read per switch
 // between inserting and removing, not per operation.
-//
-// This is the single place where the parallel engine will plug in: with
-// threads != 1 it will hand the stream to the engine instead of this loop.
-ReplayStats replay(const pdt::OpStream& s, unsigned threads, pdt::Triangulation& t) {
-  if (threads != 1)
-    std::fprintf(stderr,
-                 "pdt: note: the parallel engine is not available yet; replaying on the sequential kernel "
-                 "(1 thread) instead of the %u requested\n",
-                 threads);
+ReplayStats replay(const pdt::OpStream& s, pdt::Triangulation& t) {
   ReplayStats st;
   std::vector<pdt::VertexId> vertex_of;
   vertex_of.reserve(s.insert_count());
@@ -282,7 +378,7 @@ bool is_point_file(const std::string& p) {
 
 int cmd_run(Args args) {
   std::optional<std::string> input, out;
-  unsigned threads = 1;
+  unsigned threads = 0;  // 0: the sequential kernel
   bool validate = false;
   while (!args.done()) {
     if (is_help(args.peek())) {
@@ -327,23 +423,41 @@ int cmd_run(Args args) {
   const double read_seconds = read_sw.seconds();
 
   pdt::Triangulation t;
-  const ReplayStats st = replay(s, threads, t);
+  const ReplayStats st = threads ? replay_engine(s, threads, t) : replay(s, t);
 
   row("input", *input + (s.box ? ", box " + box_string(*s.box) : ""));
-  row("threads", std::to_string(st.threads_used) +
-                     (threads != st.threads_used ? " (" + std::to_string(threads) + " requested; sequential kernel)" : ""));
+  row("threads", st.engine ? std::to_string(st.threads_used) + " (parallel engine, " +
+                                 std::to_string(st.blocks_per_axis) + "^3 blocks, allocator " +
+                                 pdt::allocator_name() + ")"
+                           : std::string("1 (sequential kernel)"));
   row("vertices", format_count(t.number_of_vertices()));
   row("finite tets", format_count(t.number_of_finite_cells()));
   row("insertions", format_count(st.insertions) + " (" + format_count(st.duplicates) + " duplicates)");
   row("removals", format_count(st.removals) +
                       (st.multiplicity_lowered ? " (" + format_count(st.multiplicity_lowered) + " lowered a multiplicity)" : ""));
   row("read time", format_seconds(read_seconds));
-  row("insert time", format_seconds(st.insert_seconds) + per_second(st.insertions, st.insert_seconds));
-  row("remove time", format_seconds(st.remove_seconds) + per_second(st.removals, st.remove_seconds));
-  const double total = st.insert_seconds + st.remove_seconds;
+  if (st.mixed_seconds > 0) {
+    row("mixed time", format_seconds(st.mixed_seconds) + " (insertions and removals interleaved)");
+  } else {
+    row("insert time", format_seconds(st.insert_seconds) + per_second(st.insertions, st.insert_seconds));
+    row("remove time", format_seconds(st.remove_seconds) + per_second(st.removals, st.remove_seconds));
+  }
+  const double total = st.insert_seconds + st.remove_seconds + st.mixed_seconds;
   row("operations/s", total > 0 ? format_count(static_cast<std::uint64_t>(static_cast<double>(s.ops.size()) / total))
                                 : std::string("n/a"));
   row("peak memory", format_megabytes(pdt::detail::peak_rss_bytes()));
+  if (st.engine) {
+    const pdt::WorkerStats w = st.engine_stats.total();
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "%s completed, %s attempts, %s rollbacks, %s deferred, %s sleeps (%.3f s asleep)",
+                  format_count(w.completed).c_str(), format_count(w.attempts).c_str(),
+                  format_count(w.rollbacks).c_str(), format_count(w.deferred).c_str(), format_count(w.sleeps).c_str(),
+                  w.seconds_asleep);
+    row("workers", buf);
+    std::snprintf(buf, sizeof buf, "%.4f%% (max over workers); %s operations ran with the world stopped",
+                  100.0 * w.max_rollbacks_per_completed, format_count(st.engine_stats.global_operations).c_str());
+    row("rollbacks/op", buf);
+  }
 
   int status = 0;
   if (validate) {

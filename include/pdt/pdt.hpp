@@ -1,5 +1,6 @@
 #pragma once
 // pdt: dynamic, parallel 3D Delaunay triangulation. Umbrella header.
+#include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"

@@ -1,0 +1,1088 @@
+// bench_parallel: the paper's §4.1 tables (Tables 2-4, and Table 1 of §3.3)
+// for pdt::Engine, against CGAL's sequential and CGAL's own parallel
+// Delaunay_triangulation_3, same points, same run.
+//
+//   bench_parallel [--points N] [--threads 1,2,4,8,16] [--dists uniform,normal,line]
+//                  [--remove-fraction F] [--extreme] [--interleaved] [--skip-cgal-parallel]
+//                  [--seed S] [--csv FILE] [--timeout S]
+//
+// Per distribution: N points from pdt::generate (random order).
+//  pdt      for each thread count T (1 always included: it is Speedup1's base):
+//           a tbb::task_arena(T); inside it an Engine with options.threads = T.
+//           Insertion phase: submit every insertion (insert(p, cb)), drain().
+//           Removal phase: remove_insertion(ticket, cb) of the first F*N
+//           tickets, drain(). cb only counts failed operations (its cost is
+//           within the noise: one indirect call per operation, no allocation).
+//           Each phase is timed separately; its engine statistics are the
+//           difference of stats() before and after it.
+//  CGAL seq Delaunay_triangulation_3<Epick, Default, Fast_location>: insert(p)
+//           one at a time in the same order (no spatial sort), then remove(vh)
+//           of the first F*N one at a time (as bench_sequential).
+//  CGAL par Delaunay_triangulation_3 over a Parallel_tag TDS with a
+//           Spatial_lock_grid_3<Tag_priority_blocking> (50 cells per axis over
+//           the domain), in a tbb::task_arena(T): insert(first, last) as one
+//           batch (CGAL spatially sorts the batch first, inside the timing),
+//           then remove(first, beyond) of the same first F*N vertices as a batch.
+// Every configuration lives in its own scope and is freed (and malloc_trim'd)
+// before the next one. Every final triangulation must have the same numbers of
+// finite cells and vertices as CGAL's sequential one, and no pdt operation may
+// fail (the timed loops pass a callback that only counts OpResult errors):
+// MISMATCH is printed and the exit status is 1 otherwise.
+//
+// --extreme     §3.3 / Table 1: 3,000 normal points, insert all then remove
+//               all, pdt with 1 and max(T) threads (median of 5 runs; CGAL
+//               sequential for reference).
+// --interleaved a refiner-like stream: pdt::generate with
+//               RemovalOrder::interleaved and remove fraction 0.3, replayed
+//               as one mixed phase (pdt at each T, CGAL sequential replay).
+// Order: the main tables, then --interleaved, then --extreme. A configuration
+// running past --timeout (an engine livelock) prints HANG and exits 3; what
+// was printed and written to the CSV before stays.
+#ifndef CGAL_LINKED_WITH_TBB
+#define CGAL_LINKED_WITH_TBB 1  // CGAL's Parallel_tag code paths; pdt_internal links TBB
+#endif
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Delaunay_triangulation_cell_base_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Spatial_lock_grid_3.h>
+#include <CGAL/Triangulation_data_structure_3.h>
+#include <CGAL/Triangulation_vertex_base_3.h>
+#include <CGAL/version.h>
+#include <malloc.h>
+#include <sched.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/version.h>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "pdt/engine.hpp"
+#include "pdt/error.hpp"
+#include "pdt/generate.hpp"
+#include "pdt/triangulation.hpp"
+#include "sys_info.hpp"
+
+// CGAL's Parallel_tag containers allocate with tbb::scalable_allocator: the
+// benches link TBB::tbbmalloc for it (CMakeLists.txt).
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using CgalDT = CGAL::Delaunay_triangulation_3<K, CGAL::Default, CGAL::Fast_location>;
+using ParTds = CGAL::Triangulation_data_structure_3<CGAL::Triangulation_vertex_base_3<K>,
+                                                   CGAL::Delaunay_triangulation_cell_base_3<K>, CGAL::Parallel_tag>;
+using LockGrid = CGAL::Spatial_lock_grid_3<CGAL::Tag_priority_blocking>;
+using CgalParDT = CGAL::Delaunay_triangulation_3<K, ParTds, CGAL::Default, LockGrid>;
+
+constexpr int lock_grid_cells_per_axis = 50;
+constexpr std::uint64_t extreme_points = 3000;
+constexpr int extreme_repeats = 5;
+constexpr double interleaved_fraction = 0.3;
+
+using pdt::detail::Stopwatch;
+
+// Returns freed heap to the OS so the next configuration starts clean.
+void settle() { ::malloc_trim(0); }
+double mib(double bytes) { return bytes / (1024.0 * 1024.0); }
+
+struct PointHash {
+  std::size_t operator()(const pdt::Point3& p) const {
+    std::size_t h = std::hash<double>()(p.x + 0.0);
+    h ^= std::hash<double>()(p.y + 0.0) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+    h ^= std::hash<double>()(p.z + 0.0) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+    return h;
+  }
+};
+
+// ---- options ------------------------------------------------------------------
+struct Options {
+  std::uint64_t points = 2000000;
+  std::vector<unsigned> threads{1, 2, 4, 8, 16};
+  std::vector<std::string> dists{"uniform", "normal", "line"};
+  double remove_fraction = 0.1;
+  bool extreme = false;
+  bool interleaved = false;
+  bool cgal_parallel = true;
+  std::uint64_t seed = 1;
+  std::string csv;
+  double timeout = 3600;  // seconds one configuration may take before the run is declared hung; 0 = never
+};
+
+[[noreturn]] void usage(const char* prog, int code) {
+  std::fprintf(code ? stderr : stdout,
+               "usage: %s [--points N] [--threads LIST] [--dists LIST] [--remove-fraction F] [--extreme]\n"
+               "          [--interleaved] [--skip-cgal-parallel] [--seed S] [--csv FILE] [--timeout S]\n"
+               "  --points N            points per distribution (default 2000000)\n"
+               "  --threads LIST        comma-separated thread counts (default 1,2,4,8,16; 1 is always run)\n"
+               "  --dists LIST          comma-separated distributions (default uniform,normal,line)\n"
+               "  --remove-fraction F   fraction of the insertions undone after all of them, first inserted\n"
+               "                        first (default 0.1)\n"
+               "  --extreme             also §3.3 (Table 1): 3,000 normal points, insert then remove all,\n"
+               "                        1 and max threads\n"
+               "  --interleaved         also a refiner-like stream (RemovalOrder::interleaved, fraction 0.3)\n"
+               "  --skip-cgal-parallel  do not run CGAL's Parallel_tag triangulation\n"
+               "  --seed S              generator seed (default 1)\n"
+               "  --csv FILE            also write every measurement as a CSV row\n"
+               "  --timeout S           declare a configuration hung after S seconds (default 3600; 0 = never;\n"
+               "                        an extreme-case run: at most 120): print HANG and exit 3\n",
+               prog);
+  std::exit(code);
+}
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+Options parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s: %s needs a value\n", argv[0], a.c_str());
+        usage(argv[0], 2);
+      }
+      return argv[++i];
+    };
+    auto unsigned_value = [](const std::string& v) {
+      std::size_t pos = 0;
+      unsigned long long x = std::stoull(v, &pos);
+      if (pos != v.size() || v[0] == '-') throw std::invalid_argument(v);
+      return x;
+    };
+    try {
+      if (a == "--points") {
+        o.points = unsigned_value(value());
+        if (o.points == 0) throw std::invalid_argument("0");
+      } else if (a == "--threads") {
+        o.threads.clear();
+        for (const auto& t : split(value())) {
+          unsigned long long x = unsigned_value(t);
+          if (x == 0 || x > 4096) throw std::invalid_argument(t);
+          o.threads.push_back(static_cast<unsigned>(x));
+        }
+        if (o.threads.empty()) throw std::invalid_argument("empty list");
+      } else if (a == "--dists") {
+        o.dists = split(value());
+        if (o.dists.empty()) throw std::invalid_argument("empty list");
+      } else if (a == "--remove-fraction") {
+        std::string v = value();
+        std::size_t pos = 0;
+        o.remove_fraction = std::stod(v, &pos);
+        if (pos != v.size() || !(o.remove_fraction >= 0 && o.remove_fraction <= 1)) throw std::invalid_argument(v);
+      } else if (a == "--extreme") {
+        o.extreme = true;
+      } else if (a == "--interleaved") {
+        o.interleaved = true;
+      } else if (a == "--skip-cgal-parallel") {
+        o.cgal_parallel = false;
+      } else if (a == "--seed") {
+        o.seed = unsigned_value(value());
+      } else if (a == "--csv") {
+        o.csv = value();
+      } else if (a == "--timeout") {
+        std::string v = value();
+        std::size_t pos = 0;
+        o.timeout = std::stod(v, &pos);
+        if (pos != v.size() || !(o.timeout >= 0)) throw std::invalid_argument(v);
+      } else if (a == "--help" || a == "-h") {
+        usage(argv[0], 0);
+      } else {
+        std::fprintf(stderr, "%s: unknown option %s\n", argv[0], a.c_str());
+        usage(argv[0], 2);
+      }
+    } catch (const std::logic_error&) {
+      std::fprintf(stderr, "%s: bad value for %s\n", argv[0], a.c_str());
+      usage(argv[0], 2);
+    }
+  }
+  // Speedup1 needs the 1-thread run; keep the order given otherwise, no repeats.
+  std::vector<unsigned> ts{1};
+  for (unsigned t : o.threads)
+    if (std::find(ts.begin(), ts.end(), t) == ts.end()) ts.push_back(t);
+  o.threads = ts;
+  return o;
+}
+
+// ---- watchdog -------------------------------------------------------------------
+// A configuration that never finishes (an engine that livelocks or loops) must
+// not eat a whole benchmark session: past its deadline the run prints HANG with
+// what was running (the tables and CSV rows so far are already out) and exits 3.
+class Watchdog {
+ public:
+  Watchdog() : thread_([this] { loop(); }) {}
+  ~Watchdog() {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+  void arm(const std::string& what, double seconds) {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      what_ = what;
+      seconds_ = seconds;
+      armed_ = seconds > 0;
+      const double capped = std::min(seconds, 1e9);  // "inf" or huge: no overflow of the time point
+      deadline_ = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                          std::chrono::duration<double>(capped));
+    }
+    cv_.notify_all();
+  }
+  void disarm() {
+    std::lock_guard<std::mutex> lock(m_);
+    armed_ = false;
+  }
+
+ private:
+  void loop() {
+    std::unique_lock<std::mutex> lock(m_);
+    while (!stop_) {
+      if (!armed_) {
+        cv_.wait(lock);
+        continue;
+      }
+      if (cv_.wait_until(lock, deadline_) == std::cv_status::timeout && armed_ && !stop_ &&
+          std::chrono::steady_clock::now() >= deadline_) {
+        std::fflush(stdout);
+        std::printf("\nHANG: %s did not finish within %g s; aborting (exit 3)\n", what_.c_str(), seconds_);
+        std::fprintf(stderr, "HANG: %s did not finish within %g s; aborting (exit 3)\n", what_.c_str(), seconds_);
+        std::fflush(stdout);
+        std::fflush(stderr);
+        std::_Exit(3);
+      }
+    }
+  }
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::string what_;
+  double seconds_ = 0;
+  bool armed_ = false, stop_ = false;
+  std::chrono::steady_clock::time_point deadline_;
+  std::thread thread_;
+};
+
+Watchdog* watchdog = nullptr;  // set by main
+double config_timeout = 0;
+
+// Arms the watchdog for the duration of one configuration.
+struct Guard {
+  Guard(const std::string& what, double seconds) {
+    if (watchdog) watchdog->arm(what, seconds);
+  }
+  ~Guard() {
+    if (watchdog) watchdog->disarm();
+  }
+};
+constexpr double extreme_run_timeout = 120;
+
+// ---- machine ------------------------------------------------------------------
+std::string cpu_model() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      auto colon = line.find(':');
+      if (colon != std::string::npos) {
+        std::string m = line.substr(colon + 1);
+        m.erase(0, m.find_first_not_of(" \t"));
+        return m;
+      }
+    }
+  return "unknown";
+}
+
+int affinity_cpus() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (::sched_getaffinity(0, sizeof set, &set) != 0) return 0;
+  return CPU_COUNT(&set);
+}
+
+// ---- measurements ---------------------------------------------------------------
+struct Phase {
+  bool ran = false;
+  double seconds = 0;
+  std::uint64_t ops = 0;        // operations of the phase (submitted)
+  double max_rb_pct = 0;        // max over workers of rollbacks / completed in this phase, in %
+  std::uint64_t rollbacks = 0;  // summed over workers
+  std::uint64_t sleeps = 0;
+  double seconds_asleep = 0;
+  std::uint64_t deferred = 0;
+  std::uint64_t global_ops = 0;
+  unsigned busy_workers = 0;  // workers that completed at least one operation
+  std::uint64_t errors = 0;   // operations whose OpResult carried an error
+};
+
+// Counts the operations that fail (OpResult::error): the only callback the
+// timed loops pass. It fits std::function's small buffer (no allocation) and
+// costs one indirect call per operation.
+struct ErrorSink {
+  std::atomic<std::uint64_t> count{0};
+  std::mutex m;
+  std::string first;
+  void note(const pdt::OpResult& r) {
+    if (!r.error) return;
+    count.fetch_add(1, std::memory_order_relaxed);
+    std::lock_guard<std::mutex> lock(m);
+    if (!first.empty()) return;
+    try {
+      std::rethrow_exception(r.error);
+    } catch (const std::exception& e) {
+      first = e.what();
+    } catch (...) {
+      first = "unknown exception";
+    }
+  }
+  pdt::Engine::Callback callback() {
+    return [this](const pdt::OpResult& r) {
+      if (r.error) note(r);
+    };
+  }
+};
+
+Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double seconds, std::uint64_t ops) {
+  Phase p;
+  p.ran = true;
+  p.seconds = seconds;
+  p.ops = ops;
+  for (std::size_t i = 0; i < b.workers.size(); ++i) {
+    const pdt::WorkerStats& w1 = b.workers[i];
+    const pdt::WorkerStats w0 = i < a.workers.size() ? a.workers[i] : pdt::WorkerStats{};
+    const std::uint64_t completed = w1.completed - w0.completed;
+    const std::uint64_t rollbacks = w1.rollbacks - w0.rollbacks;
+    // As the engine's own max_rollbacks_per_completed: 0 for a worker that completed nothing.
+    if (completed) p.max_rb_pct = std::max(p.max_rb_pct, 100.0 * double(rollbacks) / double(completed));
+    p.busy_workers += completed > 0;
+    p.rollbacks += rollbacks;
+    p.sleeps += w1.sleeps - w0.sleeps;
+    p.seconds_asleep += w1.seconds_asleep - w0.seconds_asleep;
+    p.deferred += w1.deferred - w0.deferred;
+  }
+  p.global_ops = b.global_operations - a.global_operations;
+  return p;
+}
+
+// The final state of a triangulation, to compare pdt with CGAL.
+struct Shape {
+  std::size_t cells_after_insert = 0;  // finite cells once every insertion is done
+  std::size_t finite_cells = 0;        // at the end
+  std::size_t vertices = 0;            // at the end
+};
+
+struct Result {
+  std::string impl;  // pdt, cgal_seq, cgal_par
+  unsigned threads = 1;
+  unsigned blocks = 0;  // pdt: blocks per axis
+  Phase ins, rem, mixed;
+  double bytes_per_tet = 0;  // pdt: memory_bytes() / number_of_cells() after the insertions
+  Shape shape;
+  std::string first_error;  // pdt: the first failed operation's message
+};
+
+// pdt: insertions then removals of the first n_remove insertions.
+Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::size_t n_remove, unsigned threads) {
+  Result r;
+  r.impl = "pdt";
+  r.threads = threads;
+  settle();
+  {
+    pdt::Triangulation t;
+    tbb::task_arena arena(static_cast<int>(threads));
+    arena.execute([&] {
+      ErrorSink errors;  // outlives the engine, whose callbacks use it
+      pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
+      opts.threads = threads;
+      pdt::Engine e(t, box, opts);
+      r.blocks = e.blocks_per_axis();
+      std::vector<pdt::Engine::Ticket> tickets(n_remove);
+
+      const pdt::EngineStats s0 = e.stats();
+      Stopwatch sw;
+      for (std::size_t k = 0; k < pts.size(); ++k) {
+        pdt::Engine::Ticket tk = e.insert(pts[k], errors.callback());
+        if (k < n_remove) tickets[k] = tk;
+      }
+      e.drain();
+      const double t_ins = sw.seconds();
+      const pdt::EngineStats s1 = e.stats();
+      r.ins = phase_between(s0, s1, t_ins, pts.size());
+      r.ins.errors = errors.count.load();
+      r.shape.cells_after_insert = t.number_of_finite_cells();
+      r.bytes_per_tet = t.number_of_cells() ? double(t.memory_bytes()) / double(t.number_of_cells()) : 0;
+
+      sw.restart();
+      for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
+      e.drain();
+      const double t_rem = sw.seconds();
+      r.rem = phase_between(s1, e.stats(), t_rem, n_remove);
+      r.rem.errors = errors.count.load() - r.ins.errors;
+      r.first_error = errors.first;
+    });
+    r.shape.finite_cells = t.number_of_finite_cells();
+    r.shape.vertices = t.number_of_vertices();
+  }
+  settle();
+  return r;
+}
+
+// pdt: a mixed stream (insertions and remove_insertion) replayed as one phase.
+Result run_pdt_stream(const pdt::OpStream& s, unsigned threads) {
+  Result r;
+  r.impl = "pdt";
+  r.threads = threads;
+  settle();
+  {
+    pdt::Triangulation t;
+    tbb::task_arena arena(static_cast<int>(threads));
+    arena.execute([&] {
+      ErrorSink errors;  // outlives the engine, whose callbacks use it
+      pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
+      opts.threads = threads;
+      pdt::Engine e(t, *s.box, opts);
+      r.blocks = e.blocks_per_axis();
+      const pdt::EngineStats s0 = e.stats();
+      Stopwatch sw;
+      for (const pdt::Operation& op : s.ops) {
+        if (op.kind == pdt::Operation::Kind::insert)
+          (void)e.insert(op.point, errors.callback());
+        else
+          e.remove_insertion(op.target, errors.callback());  // tickets number the insertions from 0, as the stream does
+      }
+      e.drain();
+      r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
+      r.mixed.errors = errors.count.load();
+      r.first_error = errors.first;
+    });
+    r.shape.finite_cells = t.number_of_finite_cells();
+    r.shape.vertices = t.number_of_vertices();
+  }
+  settle();
+  return r;
+}
+
+// For each of the first n_remove insertions: does undoing it make the vertex
+// disappear (the last undone insertion of its point)? CGAL has no multiplicity.
+std::vector<char> last_removals(const std::vector<pdt::Point3>& pts, std::size_t n_remove) {
+  std::vector<char> out(n_remove, 0);
+  std::unordered_map<pdt::Point3, std::uint32_t, PointHash> count;
+  count.reserve(pts.size() * 2);
+  for (const auto& p : pts) ++count[p];
+  for (std::size_t k = 0; k < n_remove; ++k) out[k] = --count[pts[k]] == 0;
+  return out;
+}
+
+std::vector<K::Point_3> to_cgal(const std::vector<pdt::Point3>& pts) {
+  std::vector<K::Point_3> c;
+  c.reserve(pts.size());
+  for (const auto& p : pts) c.emplace_back(p.x, p.y, p.z);
+  return c;
+}
+
+// CGAL sequential: one point at a time, no spatial sort; then remove(vh) one at a time.
+Result run_cgal_seq(const std::vector<pdt::Point3>& pts, const std::vector<char>& cgal_removes) {
+  Result r;
+  r.impl = "cgal_seq";
+  settle();
+  {
+    const std::size_t n_remove = cgal_removes.size();
+    std::vector<K::Point_3> cpts = to_cgal(pts);
+    std::vector<CgalDT::Vertex_handle> vh(n_remove);
+    CgalDT dt;
+    Stopwatch sw;
+    for (std::size_t k = 0; k < cpts.size(); ++k) {
+      CgalDT::Vertex_handle v = dt.insert(cpts[k]);
+      if (k < n_remove) vh[k] = v;
+    }
+    r.ins.ran = true;
+    r.ins.seconds = sw.seconds();
+    r.ins.ops = cpts.size();
+    r.shape.cells_after_insert = dt.number_of_finite_cells();
+    sw.restart();
+    for (std::size_t k = 0; k < n_remove; ++k)
+      if (cgal_removes[k]) dt.remove(vh[k]);
+    r.rem.ran = true;
+    r.rem.seconds = sw.seconds();
+    r.rem.ops = n_remove;
+    r.shape.finite_cells = dt.number_of_finite_cells();
+    r.shape.vertices = dt.number_of_vertices();
+  }
+  settle();
+  return r;
+}
+
+// CGAL sequential replay of a mixed stream.
+Result run_cgal_seq_stream(const pdt::OpStream& s) {
+  Result r;
+  r.impl = "cgal_seq";
+  settle();
+  {
+    // Which removals make a vertex disappear (CGAL has no multiplicity).
+    std::vector<char> really(s.ops.size(), 1);
+    std::vector<K::Point_3> ins_pts;
+    {
+      std::vector<pdt::Point3> inserted;
+      std::unordered_map<pdt::Point3, std::uint32_t, PointHash> count;
+      for (std::size_t i = 0; i < s.ops.size(); ++i) {
+        const pdt::Operation& op = s.ops[i];
+        if (op.kind == pdt::Operation::Kind::insert) {
+          inserted.push_back(op.point);
+          ++count[op.point];
+        } else {
+          really[i] = --count[inserted[op.target]] == 0;
+        }
+      }
+      ins_pts = to_cgal(inserted);
+    }
+    std::vector<CgalDT::Vertex_handle> vh(ins_pts.size());
+    CgalDT dt;
+    std::size_t next = 0;
+    Stopwatch sw;
+    for (std::size_t i = 0; i < s.ops.size(); ++i) {
+      const pdt::Operation& op = s.ops[i];
+      if (op.kind == pdt::Operation::Kind::insert) {
+        vh[next] = dt.insert(ins_pts[next]);
+        ++next;
+      } else if (really[i]) {
+        dt.remove(vh[op.target]);
+      }
+    }
+    r.mixed.ran = true;
+    r.mixed.seconds = sw.seconds();
+    r.mixed.ops = s.ops.size();
+    r.shape.finite_cells = dt.number_of_finite_cells();
+    r.shape.vertices = dt.number_of_vertices();
+  }
+  settle();
+  return r;
+}
+
+// CGAL parallel (Parallel_tag + spatial lock grid) in an arena of `threads`:
+// batch insertion (spatially sorted by CGAL), then batch removal.
+Result run_cgal_par(const std::vector<pdt::Point3>& pts, const pdt::Box& box, const std::vector<char>& cgal_removes,
+                    unsigned threads) {
+  Result r;
+  r.impl = "cgal_par";
+  r.threads = threads;
+  settle();
+  {
+    const std::size_t n_remove = cgal_removes.size();
+    std::vector<K::Point_3> cpts = to_cgal(pts);
+    tbb::task_arena arena(static_cast<int>(threads));
+    LockGrid lock(CGAL::Bbox_3(box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y, box.hi.z), lock_grid_cells_per_axis);
+    CgalParDT dt(&lock);
+    arena.execute([&] {
+      Stopwatch sw;
+      dt.insert(cpts.begin(), cpts.end());
+      r.ins.ran = true;
+      r.ins.seconds = sw.seconds();
+      r.ins.ops = cpts.size();
+    });
+    r.shape.cells_after_insert = dt.number_of_finite_cells();
+
+    // The handles of the first n_remove points (untimed): through a point -> vertex map.
+    std::vector<CgalParDT::Vertex_handle> to_remove;
+    {
+      std::unordered_map<pdt::Point3, CgalParDT::Vertex_handle, PointHash> where;
+      where.reserve(dt.number_of_vertices() * 2);
+      for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
+        const K::Point_3& p = v->point();
+        where.emplace(pdt::Point3{p.x(), p.y(), p.z()}, v);
+      }
+      to_remove.reserve(n_remove);
+      for (std::size_t k = 0; k < n_remove; ++k)
+        if (cgal_removes[k]) to_remove.push_back(where.at(pts[k]));
+    }
+    settle();
+    arena.execute([&] {
+      Stopwatch sw;
+      dt.remove(to_remove.begin(), to_remove.end());
+      r.rem.ran = true;
+      r.rem.seconds = sw.seconds();
+      r.rem.ops = n_remove;
+    });
+    r.shape.finite_cells = dt.number_of_finite_cells();
+    r.shape.vertices = dt.number_of_vertices();
+  }
+  settle();
+  return r;
+}
+
+// ---- output -------------------------------------------------------------------
+struct Csv {
+  std::ofstream f;
+  bool on = false;
+  void open(const std::string& path) {
+    if (path.empty()) return;
+    f.open(path);
+    if (!f) throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write " + path);
+    on = true;
+    f << "experiment,dist,points,impl,phase,threads,blocks_per_axis,ops,seconds,speedup1,speedup2,"
+         "cgal_par_over_pdt,max_rollbacks_per_completed_pct,rollbacks,sleeps,seconds_asleep,deferred,"
+         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells\n";
+  }
+  // base1: pdt's 1-thread time of the phase; cgal: CGAL seq time; par: CGAL par time at this T (0: none).
+  void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
+           const char* phase_name, const Phase& p, double base1, double cgal, double par) {
+    if (!on || !p.ran) return;
+    const bool is_pdt = r.impl == "pdt";
+    char buf[1024];
+    auto ratio = [&](double num, double den) -> std::string {
+      if (num <= 0 || den <= 0) return "";
+      char b[32];
+      std::snprintf(b, sizeof b, "%.4f", num / den);
+      return b;
+    };
+    std::string s1 = is_pdt ? ratio(base1, p.seconds) : "";
+    std::string s2 = is_pdt ? ratio(cgal, p.seconds) : "";
+    std::string s3 = is_pdt ? ratio(par, p.seconds) : "";
+    std::snprintf(buf, sizeof buf, "%s,%s,%llu,%s,%s,%u,%u,%llu,%.6f,%s,%s,%s,", experiment.c_str(), dist.c_str(),
+                  static_cast<unsigned long long>(points), r.impl.c_str(), phase_name, r.threads, r.blocks,
+                  static_cast<unsigned long long>(p.ops), p.seconds, s1.c_str(), s2.c_str(), s3.c_str());
+    f << buf;
+    if (is_pdt) {
+      std::snprintf(buf, sizeof buf, "%.6f,%llu,%llu,%.6f,%llu,%llu,%u,%llu,", p.max_rb_pct,
+                    static_cast<unsigned long long>(p.rollbacks), static_cast<unsigned long long>(p.sleeps),
+                    p.seconds_asleep, static_cast<unsigned long long>(p.deferred),
+                    static_cast<unsigned long long>(p.global_ops), p.busy_workers,
+                    static_cast<unsigned long long>(p.errors));
+      f << buf;
+    } else {
+      f << ",,,,,,,,";
+    }
+    if (is_pdt && &p == &r.ins)
+      f << r.bytes_per_tet;
+    f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << "\n";
+    f.flush();
+  }
+};
+
+// A table with a label column and two groups of per-thread columns.
+class Table {
+ public:
+  Table(std::vector<std::string> groups, std::vector<unsigned> threads) : groups_(std::move(groups)), threads_(threads) {}
+  // cells: groups_.size() * threads_.size() strings, group-major.
+  void add(const std::string& label, std::vector<std::string> cells) { rows_.push_back({label, std::move(cells)}); }
+  void print() const {
+    const int lw = 38, cw = 10;
+    const int gw = cw * int(threads_.size());
+    std::printf("%-*s", lw, "");
+    for (const auto& g : groups_) std::printf(" |%*s%-*s", (gw - int(g.size())) / 2, "", gw - (gw - int(g.size())) / 2, g.c_str());
+    std::printf("\n%-*s", lw, "#Threads");
+    for (std::size_t g = 0; g < groups_.size(); ++g) {
+      std::printf(" |");
+      for (unsigned t : threads_) std::printf("%*u", cw, t);
+    }
+    std::printf("\n");
+    for (const auto& row : rows_) {
+      std::printf("%-*s", lw, row.first.c_str());
+      for (std::size_t i = 0; i < row.second.size(); ++i) {
+        if (i % threads_.size() == 0) std::printf(" |");
+        std::printf("%*s", cw, row.second[i].c_str());
+      }
+      std::printf("\n");
+    }
+    std::fflush(stdout);
+  }
+
+ private:
+  std::vector<std::string> groups_;
+  std::vector<unsigned> threads_;
+  std::vector<std::pair<std::string, std::vector<std::string>>> rows_;
+};
+
+std::string fmt(const char* f, double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+std::string fmt_u(std::uint64_t v) { return std::to_string(v); }
+// num / den as "%.2f", "-" when either is not positive (a phase with no operations).
+std::string fmt_ratio(double num, double den) { return num > 0 && den > 0 ? fmt("%.2f", num / den) : "-"; }
+
+// Compares a final state with CGAL sequential's; prints MISMATCH and returns false if they differ.
+bool check(const char* what, unsigned threads, const Shape& s, const Shape& ref, bool check_insert = true) {
+  const bool ok = s.finite_cells == ref.finite_cells && s.vertices == ref.vertices &&
+                  (!check_insert || s.cells_after_insert == ref.cells_after_insert);
+  if (!ok && check_insert)
+    std::printf(
+        "  MISMATCH: %s with %u thread(s): finite cells after insertion %zu (CGAL seq %zu), at the end %zu (CGAL seq "
+        "%zu), vertices at the end %zu (CGAL seq %zu)\n",
+        what, threads, s.cells_after_insert, ref.cells_after_insert, s.finite_cells, ref.finite_cells, s.vertices,
+        ref.vertices);
+  else if (!ok)
+    std::printf("  MISMATCH: %s with %u thread(s): finite cells at the end %zu (CGAL seq %zu), vertices at the end %zu "
+                "(CGAL seq %zu)\n",
+                what, threads, s.finite_cells, ref.finite_cells, s.vertices, ref.vertices);
+  return ok;
+}
+
+// pdt operations that failed (an error in their OpResult): printed loudly, counted as a mismatch.
+std::string error_note(const char* what, const Result& r) {
+  const std::uint64_t n = r.ins.errors + r.rem.errors + r.mixed.errors;
+  if (n == 0) return "";
+  char b[256];
+  std::snprintf(b, sizeof b, "  MISMATCH: %s with %u thread(s): %llu operation(s) FAILED; first: ", what, r.threads,
+                static_cast<unsigned long long>(n));
+  return b + r.first_error + "\n";
+}
+bool check_errors(const char* what, const Result& r) {
+  const std::string note = error_note(what, r);
+  std::fputs(note.c_str(), stdout);
+  return note.empty();
+}
+
+void progress(const char* fmt_str, ...) __attribute__((format(printf, 1, 2)));
+void progress(const char* fmt_str, ...) {
+  va_list ap;
+  va_start(ap, fmt_str);
+  std::vfprintf(stderr, fmt_str, ap);
+  va_end(ap);
+  std::fflush(stderr);
+}
+
+std::vector<pdt::Point3> points_of(const pdt::OpStream& s) {
+  std::vector<pdt::Point3> pts;
+  pts.reserve(s.ops.size());
+  for (const auto& op : s.ops)
+    if (op.kind == pdt::Operation::Kind::insert) pts.push_back(op.point);
+  return pts;
+}
+
+// ---- experiments ----------------------------------------------------------------
+// Tables 2-4: one distribution. Returns the number of mismatches.
+int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
+  const std::string name = pdt::to_string(dist);
+  std::vector<pdt::Point3> pts;
+  pdt::Box box;
+  {
+    pdt::GenerateOptions g;
+    g.dist = dist;
+    g.points = o.points;
+    g.seed = o.seed;
+    pdt::OpStream s = pdt::generate(g);
+    box = *s.box;
+    pts = points_of(s);
+  }
+  const std::size_t n_remove = static_cast<std::size_t>(o.remove_fraction * double(pts.size()));
+  const std::vector<char> cgal_removes = last_removals(pts, n_remove);
+
+  progress("[%s] CGAL sequential...\n", name.c_str());
+  const Result seq = [&] {
+    Guard g(name + ": CGAL sequential", config_timeout);
+    return run_cgal_seq(pts, cgal_removes);
+  }();
+  std::vector<Result> mine, par;
+  for (unsigned t : o.threads) {
+    progress("[%s] pdt, %u thread(s)...\n", name.c_str(), t);
+    {
+      Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
+      mine.push_back(run_pdt(pts, box, n_remove, t));
+    }
+    if (o.cgal_parallel) {
+      progress("[%s] CGAL parallel, %u thread(s)...\n", name.c_str(), t);
+      Guard g(name + ": CGAL parallel with " + std::to_string(t) + " thread(s)", config_timeout);
+      par.push_back(run_cgal_par(pts, box, cgal_removes, t));
+    }
+  }
+
+  std::printf("\n== %s: %zu points inserted, then the first %zu removed (box [%g,%g]x[%g,%g]x[%g,%g]) ==\n",
+              name.c_str(), pts.size(), n_remove, box.lo.x, box.hi.x, box.lo.y, box.hi.y, box.lo.z, box.hi.z);
+  const std::size_t nt = o.threads.size();
+  Table tab({"Insertions", "Removals"}, o.threads);
+  auto row = [&](const std::string& label, auto cell) {
+    std::vector<std::string> cells;
+    for (int ph = 0; ph < 2; ++ph)
+      for (std::size_t i = 0; i < nt; ++i) cells.push_back(cell(ph, i));
+    tab.add(label, cells);
+  };
+  auto ph_of = [](const Result& r, int ph) -> const Phase& { return ph == 0 ? r.ins : r.rem; };
+  row("Time (s)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(mine[i], ph).seconds); });
+  row("Speedup1 (pdt 1 thread / pdt)", [&](int ph, std::size_t i) {
+    return fmt_ratio(ph_of(mine[0], ph).seconds, ph_of(mine[i], ph).seconds);
+  });
+  row("Max #Rollbacks/#compl.ops (%)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(mine[i], ph).max_rb_pct); });
+  row("Rollbacks (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).rollbacks); });
+  row("Sleeps (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).sleeps); });
+  row("Seconds asleep (total)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(mine[i], ph).seconds_asleep); });
+  row("Global operations", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).global_ops); });
+  row("Workers with work", [&](int ph, std::size_t i) {
+    return fmt_u(ph_of(mine[i], ph).busy_workers) + "/" + fmt_u(mine[i].threads);
+  });
+  row("Failed operations", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).errors); });
+  row("CGAL seq time (s)", [&](int ph, std::size_t i) { return i == 0 ? fmt("%.3f", ph_of(seq, ph).seconds) : "-"; });
+  row("Speedup2 (CGAL seq / pdt)", [&](int ph, std::size_t i) {
+    return fmt_ratio(ph_of(seq, ph).seconds, ph_of(mine[i], ph).seconds);
+  });
+  if (o.cgal_parallel) {
+    row("CGAL parallel time (s)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(par[i], ph).seconds); });
+    row("CGAL parallel / pdt", [&](int ph, std::size_t i) {
+      return fmt_ratio(ph_of(par[i], ph).seconds, ph_of(mine[i], ph).seconds);
+    });
+  }
+  row("pdt bytes/tet (after insertions)",
+      [&](int ph, std::size_t i) { return ph == 0 ? fmt("%.1f", mine[i].bytes_per_tet) : "-"; });
+  tab.print();
+  std::printf("  blocks per axis:");
+  for (const auto& r : mine) std::printf(" %u (T=%u)", r.blocks, r.threads);
+  std::printf("\n  finite cells after insertion %zu, at the end %zu, vertices at the end %zu (CGAL seq)\n",
+              seq.shape.cells_after_insert, seq.shape.finite_cells, seq.shape.vertices);
+
+  int bad = 0;
+  for (const auto& r : mine) bad += !check("pdt", r.threads, r.shape, seq.shape) + !check_errors("pdt", r);
+  for (const auto& r : par) bad += !check("CGAL parallel", r.threads, r.shape, seq.shape);
+  std::printf("  check: %s\n", bad ? "MISMATCH (see above)" : "every final triangulation has CGAL seq's cell and vertex counts");
+  std::printf("  peak RSS so far: %.1f MiB\n", mib(double(pdt::detail::peak_rss_bytes())));
+
+  for (std::size_t i = 0; i < nt; ++i) {
+    const double p0 = o.cgal_parallel ? par[i].ins.seconds : 0, p1 = o.cgal_parallel ? par[i].rem.seconds : 0;
+    csv.row("main", name, pts.size(), mine[i], "insert", mine[i].ins, mine[0].ins.seconds, seq.ins.seconds, p0);
+    csv.row("main", name, pts.size(), mine[i], "remove", mine[i].rem, mine[0].rem.seconds, seq.rem.seconds, p1);
+  }
+  csv.row("main", name, pts.size(), seq, "insert", seq.ins, 0, 0, 0);
+  csv.row("main", name, pts.size(), seq, "remove", seq.rem, 0, 0, 0);
+  for (const auto& r : par) {
+    csv.row("main", name, pts.size(), r, "insert", r.ins, 0, 0, 0);
+    csv.row("main", name, pts.size(), r, "remove", r.rem, 0, 0, 0);
+  }
+  return bad;
+}
+
+// Table 1 (§3.3): 3,000 normal points, insert all then remove all.
+int extreme_table(const Options& o, Csv& csv) {
+  std::vector<pdt::Point3> pts;
+  pdt::Box box;
+  {
+    pdt::GenerateOptions g;
+    g.dist = pdt::Distribution::normal;
+    g.points = extreme_points;
+    g.seed = o.seed;
+    pdt::OpStream s = pdt::generate(g);
+    box = *s.box;
+    pts = points_of(s);
+  }
+  const unsigned tmax = *std::max_element(o.threads.begin(), o.threads.end());
+  std::vector<unsigned> ts{1};
+  if (tmax > 1) ts.push_back(tmax);
+  progress("[extreme] CGAL sequential...\n");
+  const Result seq = run_cgal_seq(pts, last_removals(pts, pts.size()));
+  progress("[extreme] pdt, %zu points, threads 1 and %u, %d runs each...\n", pts.size(), tmax, extreme_repeats);
+
+  // Per thread count: median time of each phase; rollback ratio: the worst run.
+  std::vector<Result> res;
+  std::string notes;  // printed after the table
+  int bad = 0;
+  for (unsigned t : ts) {
+    std::vector<Result> runs;
+    for (int k = 0; k < extreme_repeats; ++k) {
+      const double limit = config_timeout > 0 ? std::min(config_timeout, extreme_run_timeout) : 0;
+      Guard g("extreme case: pdt with " + std::to_string(t) + " thread(s), run " + std::to_string(k + 1), limit);
+      runs.push_back(run_pdt(pts, box, pts.size(), t));
+    }
+    Result agg = runs[0];
+    auto median = [&](auto get) {
+      std::vector<double> v;
+      for (const auto& r : runs) v.push_back(get(r));
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    agg.ins.seconds = median([](const Result& r) { return r.ins.seconds; });
+    agg.rem.seconds = median([](const Result& r) { return r.rem.seconds; });
+    agg.ins.sleeps = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.ins.sleeps); }));
+    agg.rem.sleeps = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.rem.sleeps); }));
+    agg.ins.rollbacks = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.ins.rollbacks); }));
+    agg.rem.rollbacks = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.rem.rollbacks); }));
+    agg.ins.global_ops = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.ins.global_ops); }));
+    agg.rem.global_ops = static_cast<std::uint64_t>(median([](const Result& r) { return double(r.rem.global_ops); }));
+    agg.ins.max_rb_pct = agg.rem.max_rb_pct = 0;
+    agg.ins.errors = agg.rem.errors = 0;
+    for (const auto& r : runs) {
+      agg.ins.errors += r.ins.errors;
+      agg.rem.errors += r.rem.errors;
+      if (agg.first_error.empty()) agg.first_error = r.first_error;
+      agg.ins.max_rb_pct = std::max(agg.ins.max_rb_pct, r.ins.max_rb_pct);
+      agg.rem.max_rb_pct = std::max(agg.rem.max_rb_pct, r.rem.max_rb_pct);
+      if (r.shape.vertices != 0 || r.shape.finite_cells != 0 ||
+          r.shape.cells_after_insert != seq.shape.cells_after_insert) {
+        char b[512];
+        std::snprintf(b, sizeof b,
+                      "  MISMATCH: extreme case with %u thread(s): %zu finite cells after insertion (CGAL seq %zu), "
+                      "%zu vertices and %zu finite cells left at the end (want 0)\n",
+                      t, r.shape.cells_after_insert, seq.shape.cells_after_insert, r.shape.vertices,
+                      r.shape.finite_cells);
+        notes += b;
+        ++bad;
+      }
+    }
+    const std::string note = error_note("extreme case (all runs)", agg);
+    notes += note;
+    bad += !note.empty();
+    res.push_back(agg);
+  }
+
+  std::printf("\n== extreme (§3.3, Table 1): %zu normal points inserted, then all removed; median of %d runs, "
+              "rollbacks: worst run ==\n",
+              pts.size(), extreme_repeats);
+  Table tab({"Insertions", "Removals"}, ts);
+  auto row = [&](const std::string& label, auto cell) {
+    std::vector<std::string> cells;
+    for (int ph = 0; ph < 2; ++ph)
+      for (std::size_t i = 0; i < ts.size(); ++i) cells.push_back(cell(ph, i));
+    tab.add(label, cells);
+  };
+  auto ph_of = [](const Result& r, int ph) -> const Phase& { return ph == 0 ? r.ins : r.rem; };
+  row("Time (s)", [&](int ph, std::size_t i) { return fmt("%.4f", ph_of(res[i], ph).seconds); });
+  row("Speedup", [&](int ph, std::size_t i) { return fmt_ratio(ph_of(res[0], ph).seconds, ph_of(res[i], ph).seconds); });
+  row("Max #Rollbacks/#compl.ops (%)", [&](int ph, std::size_t i) { return fmt("%.1f", ph_of(res[i], ph).max_rb_pct); });
+  row("Rollbacks (total, median)", [&](int ph, std::size_t i) { return fmt_u(ph_of(res[i], ph).rollbacks); });
+  row("Sleeps (total, median)", [&](int ph, std::size_t i) { return fmt_u(ph_of(res[i], ph).sleeps); });
+  row("Global operations", [&](int ph, std::size_t i) { return fmt_u(ph_of(res[i], ph).global_ops); });
+  row("Failed operations (all runs)", [&](int ph, std::size_t i) { return fmt_u(ph_of(res[i], ph).errors); });
+  row("CGAL seq time (s)", [&](int ph, std::size_t i) { return i == 0 ? fmt("%.4f", ph_of(seq, ph).seconds) : "-"; });
+  row("Speedup2 (CGAL seq / pdt)",
+      [&](int ph, std::size_t i) { return fmt_ratio(ph_of(seq, ph).seconds, ph_of(res[i], ph).seconds); });
+  tab.print();
+  std::fputs(notes.c_str(), stdout);
+  std::printf("  finite cells after insertion %zu (CGAL seq); check: %s\n", seq.shape.cells_after_insert,
+              bad ? "MISMATCH (see above)" : "every run has CGAL's cells after insertion and ends empty");
+  for (const auto& r : res) {
+    csv.row("extreme", "normal", pts.size(), r, "insert", r.ins, res[0].ins.seconds, seq.ins.seconds, 0);
+    csv.row("extreme", "normal", pts.size(), r, "remove", r.rem, res[0].rem.seconds, seq.rem.seconds, 0);
+  }
+  csv.row("extreme", "normal", pts.size(), seq, "insert", seq.ins, 0, 0, 0);
+  csv.row("extreme", "normal", pts.size(), seq, "remove", seq.rem, 0, 0, 0);
+  return bad;
+}
+
+// A refiner-like stream: removals interleaved with the insertions.
+int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
+  const std::string name = pdt::to_string(dist);
+  pdt::GenerateOptions g;
+  g.dist = dist;
+  g.points = o.points;
+  g.seed = o.seed;
+  g.remove_fraction = interleaved_fraction;
+  g.removal_order = pdt::RemovalOrder::interleaved;
+  const pdt::OpStream s = pdt::generate(g);
+
+  progress("[%s interleaved] CGAL sequential...\n", name.c_str());
+  const Result seq = [&] {
+    Guard g(name + " interleaved: CGAL sequential", config_timeout);
+    return run_cgal_seq_stream(s);
+  }();
+  std::vector<Result> mine;
+  for (unsigned t : o.threads) {
+    progress("[%s interleaved] pdt, %u thread(s)...\n", name.c_str(), t);
+    Guard g(name + " interleaved: pdt with " + std::to_string(t) + " thread(s)", config_timeout);
+    mine.push_back(run_pdt_stream(s, t));
+  }
+
+  std::printf("\n== %s interleaved: %zu insertions and %zu removals mixed (RemovalOrder::interleaved) ==\n",
+              name.c_str(), s.insert_count(), s.remove_count());
+  Table tab({"Mixed stream"}, o.threads);
+  auto row = [&](const std::string& label, auto cell) {
+    std::vector<std::string> cells;
+    for (std::size_t i = 0; i < mine.size(); ++i) cells.push_back(cell(i));
+    tab.add(label, cells);
+  };
+  row("Time (s)", [&](std::size_t i) { return fmt("%.3f", mine[i].mixed.seconds); });
+  row("Speedup1 (pdt 1 thread / pdt)", [&](std::size_t i) { return fmt_ratio(mine[0].mixed.seconds, mine[i].mixed.seconds); });
+  row("Max #Rollbacks/#compl.ops (%)", [&](std::size_t i) { return fmt("%.3f", mine[i].mixed.max_rb_pct); });
+  row("Rollbacks (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.rollbacks); });
+  row("Deferred removals (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.deferred); });
+  row("Sleeps (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.sleeps); });
+  row("Global operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.global_ops); });
+  row("Failed operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.errors); });
+  row("CGAL seq time (s)", [&](std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });
+  row("Speedup2 (CGAL seq / pdt)", [&](std::size_t i) { return fmt_ratio(seq.mixed.seconds, mine[i].mixed.seconds); });
+  tab.print();
+  int bad = 0;
+  for (const auto& r : mine)
+    bad += !check("pdt interleaved", r.threads, r.shape, seq.shape, false) + !check_errors("pdt interleaved", r);
+  std::printf("  final finite cells %zu, vertices %zu (CGAL seq); check: %s\n", seq.shape.finite_cells,
+              seq.shape.vertices, bad ? "MISMATCH (see above)" : "pdt matches at every thread count");
+  for (const auto& r : mine)
+    csv.row("interleaved", name, s.insert_count(), r, "mixed", r.mixed, mine[0].mixed.seconds, seq.mixed.seconds, 0);
+  csv.row("interleaved", name, s.insert_count(), seq, "mixed", seq.mixed, 0, 0, 0);
+  return bad;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options o = parse(argc, argv);
+  std::vector<pdt::Distribution> dists;
+  try {
+    for (const auto& d : o.dists) dists.push_back(pdt::parse_distribution(d));
+  } catch (const pdt::Error& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 2;
+  }
+  const unsigned tmax = *std::max_element(o.threads.begin(), o.threads.end());
+  const int cpus = affinity_cpus();
+  // Let an arena of tmax really get tmax threads, even beyond the core count
+  // (oneTBB's default cap is the hardware concurrency).
+  const std::size_t parallelism = std::max<std::size_t>(tmax, std::thread::hardware_concurrency());
+  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, parallelism);
+  Watchdog dog;
+  watchdog = &dog;
+  config_timeout = o.timeout;
+
+  std::printf("bench_parallel: %llu points, threads", static_cast<unsigned long long>(o.points));
+  for (unsigned t : o.threads) std::printf(" %u", t);
+  std::printf(", remove fraction %g, seed %llu\n", o.remove_fraction, static_cast<unsigned long long>(o.seed));
+  std::printf("machine: %u hardware threads (nproc %d), CPU %s\n", std::thread::hardware_concurrency(), cpus,
+              cpu_model().c_str());
+  std::printf("pdt allocator: %s; oneTBB %s; CGAL %s (its Parallel_tag containers on tbbmalloc)\n",
+              pdt::allocator_name(), TBB_VERSION_STRING, CGAL_VERSION_STR);
+  std::printf("pdt: Engine in tbb::task_arena(T), options.threads = T; insert(p, cb) all + drain(), then "
+              "remove_insertion(first F*N, cb) + drain(); cb only counts failed operations\n");
+  std::printf("CGAL seq: Delaunay_triangulation_3<Epick, Default, Fast_location>, insert(p) one at a time (no spatial "
+              "sort), remove(vh) one at a time\n");
+  if (o.cgal_parallel)
+    std::printf("CGAL parallel: Parallel_tag TDS + Spatial_lock_grid_3<Tag_priority_blocking> (%d cells/axis), "
+                "insert(range) (spatially sorted by CGAL, sort timed), remove(range), in tbb::task_arena(T)\n",
+                lock_grid_cells_per_axis);
+  if (cpus > 0 && tmax > static_cast<unsigned>(cpus))
+    std::printf("note: %u threads asked for but only %d CPUs available: those runs are oversubscribed\n", tmax, cpus);
+  std::fflush(stdout);
+
+  int mismatches = 0;
+  try {
+    Csv csv;
+    csv.open(o.csv);
+    for (pdt::Distribution d : dists) mismatches += main_table(o, d, csv);
+    if (o.interleaved)
+      for (pdt::Distribution d : dists) mismatches += interleaved_table(o, d, csv);
+    // Last: the case most likely to expose an engine livelock (see --timeout).
+    if (o.extreme) mismatches += extreme_table(o, csv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return 2;
+  }
+  std::printf("\npeak RSS: %.1f MiB\n", mib(double(pdt::detail::peak_rss_bytes())));
+  if (mismatches)
+    std::printf("\n%d MISMATCH(ES): a final triangulation differs from CGAL's, or pdt operations failed\n", mismatches);
+  return mismatches ? 1 : 0;
+}

@@ -1,0 +1,1297 @@
+// The parallel engine (pdt::Engine): many workers on one Triangulation give
+// exactly the sequential / CGAL result for any stream, thread count and
+// interleaving; the coroutine and callback APIs; errors at submission; the
+// options and their environment mirrors; the contention manager; the
+// triangulation stays usable after the engine is gone.
+//
+// Sizes shrink under ThreadSanitizer (see scaled()): the [tsan] cases are the
+// ones meant to be run in the TSan build, e.g.
+//   TSAN_OPTIONS=halt_on_error=0 ./build-tsan/tests/pdt_tests "[engine]"
+#include <oneapi/tbb/task_arena.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <coroutine>
+#include <cstdlib>
+#include <filesystem>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/cgal_reference.hpp"
+#include "pdt/engine.hpp"
+#include "pdt/error.hpp"
+#include "pdt/generate.hpp"
+#include "pdt/io.hpp"
+#include "pdt/triangulation.hpp"
+#include "triangulation_impl.hpp"  // the contention test holds a vertex lock itself
+
+using namespace pdt_test;
+using pdt::Point3;
+
+namespace {
+
+// -- sizes ---------------------------------------------------------------------
+#if defined(__SANITIZE_THREAD__)
+constexpr bool kTsan = true;
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+constexpr bool kTsan = true;
+#else
+constexpr bool kTsan = false;
+#endif
+#else
+constexpr bool kTsan = false;
+#endif
+
+// n in an optimised build; about a fifth of it (at least `floor`) under TSan,
+// which is 5-15x slower and serialises more.
+std::size_t scaled(std::size_t n, std::size_t floor = 200) { return kTsan ? std::max(floor, n / 5) : n; }
+
+constexpr unsigned kThreadCounts[] = {1, 2, 4, 8, 16};
+constexpr pdt::Distribution kDistributions[] = {pdt::Distribution::uniform, pdt::Distribution::normal,
+                                                pdt::Distribution::line, pdt::Distribution::grid,
+                                                pdt::Distribution::sphere};
+
+// -- streams -------------------------------------------------------------------
+pdt::OpStream generated(pdt::Distribution dist, std::uint64_t n, double remove_fraction, pdt::RemovalOrder order,
+                        std::uint64_t seed = 7) {
+  pdt::GenerateOptions o;
+  o.dist = dist;
+  o.points = n;
+  o.remove_fraction = remove_fraction;
+  o.removal_order = order;
+  o.seed = seed;
+  return pdt::generate(o);
+}
+
+pdt::Box bounding_box(const std::vector<Point3>& pts) {
+  pdt::Box b{pts.front(), pts.front()};
+  for (const auto& p : pts) {
+    b.lo = {std::min(b.lo.x, p.x), std::min(b.lo.y, p.y), std::min(b.lo.z, p.z)};
+    b.hi = {std::max(b.hi.x, p.x), std::max(b.hi.y, p.y), std::max(b.hi.z, p.z)};
+  }
+  return b;
+}
+
+// A stream inserting pts in order; the first floor(F * n) insertions are undone,
+// insertion k's removal right after insertion k + d, d uniform in
+// [0, min(1024, n-1-k)] (generate's interleaved order), or all at the end.
+pdt::OpStream stream_of(const std::vector<Point3>& pts, double remove_fraction, std::uint64_t seed,
+                        bool interleaved = true) {
+  const std::size_t n = pts.size();
+  const auto m = static_cast<std::size_t>(std::floor(remove_fraction * static_cast<double>(n)));
+  std::vector<std::vector<std::uint64_t>> after(n);
+  std::mt19937_64 rng(seed);
+  for (std::size_t k = 0; k < m; ++k) {
+    std::size_t at = n - 1;
+    if (interleaved) at = k + rng() % (std::min<std::size_t>(1024, n - 1 - k) + 1);
+    after[at].push_back(k);
+  }
+  pdt::OpStream s;
+  s.box = bounding_box(pts);
+  for (std::size_t i = 0; i < n; ++i) {
+    pdt::Operation ins;
+    ins.kind = pdt::Operation::Kind::insert;
+    ins.point = pts[i];
+    s.ops.push_back(ins);
+    for (std::uint64_t k : after[i]) {
+      pdt::Operation rem;
+      rem.kind = pdt::Operation::Kind::remove;
+      rem.target = k;
+      s.ops.push_back(rem);
+    }
+  }
+  return s;
+}
+
+// The points whose insertions the stream leaves standing (with repetitions).
+std::vector<Point3> survivors(const pdt::OpStream& s) {
+  std::vector<Point3> pts;
+  std::vector<bool> alive;
+  for (const auto& op : s.ops) {
+    if (op.kind == pdt::Operation::Kind::insert) {
+      pts.push_back(op.point);
+      alive.push_back(true);
+    } else {
+      REQUIRE(op.target < alive.size());
+      REQUIRE(alive[op.target]);
+      alive[op.target] = false;
+    }
+  }
+  std::vector<Point3> out;
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (alive[i]) out.push_back(pts[i]);
+  return out;
+}
+
+void replay_sequential(pdt::Triangulation& t, const pdt::OpStream& s) {
+  std::vector<pdt::VertexId> ids;
+  for (const auto& op : s.ops) {
+    if (op.kind == pdt::Operation::Kind::insert)
+      ids.push_back(t.insert(op.point).vertex);
+    else
+      t.remove(ids.at(op.target));
+  }
+}
+
+// Collects the errors operations report through their callbacks (none is expected:
+// a valid stream's operations cannot fail).
+struct ErrorSink {
+  std::atomic<std::uint64_t> count{0};
+  std::mutex mutex;
+  std::string first;
+  pdt::Engine::Callback callback() {
+    return [this](const pdt::OpResult& r) {
+      if (!r.error) return;
+      if (count.fetch_add(1) == 0) {
+        std::string what = "unknown exception";
+        try {
+          std::rethrow_exception(r.error);
+        } catch (const std::exception& e) {
+          what = e.what();
+        } catch (...) {
+        }
+        std::lock_guard lock(mutex);
+        first = what;
+      }
+    };
+  }
+  void require_none() {
+    std::lock_guard lock(mutex);
+    INFO("operations failed: " << count.load() << ", the first with: " << first);
+    REQUIRE(count.load() == 0);
+  }
+};
+
+// Livelock detector: while alive, polls the engine's statistics; if workers
+// keep attempting operations but none completes for `limit` seconds (a lock
+// that is never released makes every operation touching it roll back
+// forever), prints the statistics and aborts, so the run fails with a
+// diagnosis instead of hanging until an outer timeout.
+class Watchdog {
+ public:
+  Watchdog(const pdt::Engine& e, std::string label) : engine_(e), label_(std::move(label)), thread_([this] { run(); }) {}
+  ~Watchdog() {
+    {
+      std::lock_guard lock(mutex_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  void run() {
+    const double limit = kTsan ? 300 : 60;
+    std::uint64_t completed = 0, attempts = 0;
+    auto last_progress = std::chrono::steady_clock::now();
+    std::unique_lock lock(mutex_);
+    while (!cv_.wait_for(lock, std::chrono::milliseconds(500), [this] { return stop_; })) {
+      const pdt::WorkerStats t = engine_.stats().total();
+      const auto now = std::chrono::steady_clock::now();
+      if (t.completed != completed || t.attempts == attempts) last_progress = now;  // progress, or idle
+      if (std::chrono::duration<double>(now - last_progress).count() > limit) {
+        std::fprintf(stderr,
+                     "\n[engine watchdog] %s: livelock: %llu attempts but no operation completed for %.0f s "
+                     "(completed %llu, rollbacks %llu, deferred %llu, sleeps %llu); aborting\n",
+                     label_.c_str(), static_cast<unsigned long long>(t.attempts - attempts), limit,
+                     static_cast<unsigned long long>(t.completed), static_cast<unsigned long long>(t.rollbacks),
+                     static_cast<unsigned long long>(t.deferred), static_cast<unsigned long long>(t.sleeps));
+        std::fflush(stderr);
+        std::abort();
+      }
+      if (t.completed != completed || t.attempts == attempts) attempts = t.attempts;
+      completed = t.completed;
+    }
+  }
+  const pdt::Engine& engine_;
+  std::string label_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;  // last: started once the rest is ready
+};
+
+// Submits a stream to an engine: ticket k must be insertion k.
+void submit_stream(pdt::Engine& e, const pdt::OpStream& s, std::vector<pdt::Engine::Ticket>& tickets,
+                   ErrorSink& errors) {
+  for (const auto& op : s.ops) {
+    if (op.kind == pdt::Operation::Kind::insert) {
+      const pdt::Engine::Ticket t = e.insert(op.point, errors.callback());
+      if (t != tickets.size()) FAIL("ticket " << t << " for insertion " << tickets.size());
+      tickets.push_back(t);
+    } else {
+      e.remove_insertion(tickets.at(op.target), errors.callback());
+    }
+  }
+}
+
+enum class ArenaMode {
+  inside,       // Engine constructed and used inside arena.execute, no arena argument
+  passed,       // Engine constructed on the test thread with &arena
+  caller_default  // no explicit arena at all: the caller's (implicit) one
+};
+
+struct EngineRun {
+  pdt::EngineStats stats;
+  pdt::EngineStats stats_at_barrier;  // when drained after `barrier` operations
+  unsigned threads = 0;
+  unsigned blocks = 0;
+};
+
+pdt::EngineOptions options_with(unsigned threads) {
+  pdt::EngineOptions o;  // not from the environment: the test decides
+  o.threads = threads;
+  o.grid_slots = 1u << 18;
+  return o;
+}
+
+// Replays s on an engine; with a barrier, drains after the first `barrier`
+// operations (the rest of the stream then runs against that state).
+EngineRun replay_engine(pdt::Triangulation& t, const pdt::OpStream& s, const pdt::Box& box, pdt::EngineOptions o,
+                        ArenaMode mode = ArenaMode::inside, int arena_concurrency = 2, std::size_t barrier = 0) {
+  EngineRun run;
+  ErrorSink errors;
+  auto body = [&](tbb::task_arena* arena) {
+    pdt::Engine e(t, box, o, arena);
+    Watchdog watchdog(e, std::to_string(s.ops.size()) + " operations, " + std::to_string(o.threads) + " workers");
+    std::vector<pdt::Engine::Ticket> tickets;
+    if (barrier) {
+      pdt::OpStream head, tail;
+      head.ops.assign(s.ops.begin(), s.ops.begin() + static_cast<std::ptrdiff_t>(barrier));
+      tail.ops.assign(s.ops.begin() + static_cast<std::ptrdiff_t>(barrier), s.ops.end());
+      submit_stream(e, head, tickets, errors);
+      e.drain();
+      run.stats_at_barrier = e.stats();
+      submit_stream(e, tail, tickets, errors);
+    } else {
+      submit_stream(e, s, tickets, errors);
+    }
+    e.drain();
+    run.stats = e.stats();
+    run.threads = e.threads();
+    run.blocks = e.blocks_per_axis();
+  };
+  if (mode == ArenaMode::caller_default) {
+    body(nullptr);
+  } else {
+    tbb::task_arena arena(arena_concurrency);
+    if (mode == ArenaMode::inside)
+      arena.execute([&] { body(nullptr); });
+    else
+      body(&arena);
+  }
+  errors.require_none();
+  return run;
+}
+
+void require_valid(const pdt::Triangulation& t) {
+  std::string why;
+  const bool ok = t.validate(&why);
+  INFO("validate: " << why);
+  REQUIRE(ok);
+}
+
+std::uint64_t total_multiplicity(const pdt::Triangulation& t) {
+  std::uint64_t m = 0;
+  for (pdt::VertexId v : t.vertices()) m += t.multiplicity(v);
+  return m;
+}
+
+// Valid, CGAL's triangulation of the stream's survivors (multiplicities
+// included), and, when given, tetrahedron for tetrahedron the sequential result.
+void require_result(const pdt::Triangulation& t, const pdt::OpStream& s, const pdt::Triangulation* seq = nullptr) {
+  require_valid(t);
+  const std::vector<Point3> surv = survivors(s);
+  require_same_as_cgal(t, surv);
+  REQUIRE(total_multiplicity(t) == surv.size());
+  if (seq) {
+    const PointIndex idx = make_point_index(surv);
+    REQUIRE(t.dimension() == seq->dimension());
+    REQUIRE(t.number_of_vertices() == seq->number_of_vertices());
+    REQUIRE(t.number_of_cells() == seq->number_of_cells());
+    const bool same = canonical_tets(t, idx) == canonical_tets(*seq, idx);
+    REQUIRE(same);
+  }
+}
+
+// The bookkeeping the engine documents: every operation completed once; every
+// attempt either completed, rolled back, or was deferred.
+void require_stats(const EngineRun& run, std::size_t operations, unsigned threads) {
+  const pdt::EngineStats& st = run.stats;
+  REQUIRE(st.workers.size() == threads);
+  std::uint64_t completed = 0;
+  for (const pdt::WorkerStats& w : st.workers) {
+    INFO("completed " << w.completed << " attempts " << w.attempts << " rollbacks " << w.rollbacks << " deferred "
+                      << w.deferred);
+    REQUIRE(w.attempts >= w.completed);
+    REQUIRE(w.attempts == w.completed + w.rollbacks + w.deferred);
+    REQUIRE(w.seconds_asleep >= 0);
+    completed += w.completed;
+  }
+  REQUIRE(completed == operations);
+  const pdt::WorkerStats total = st.total();
+  REQUIRE(total.completed == operations);
+  REQUIRE(total.attempts >= total.completed);
+}
+
+template <class F>
+std::optional<pdt::ErrorCode> error_of(F&& f, std::string* message = nullptr) {
+  try {
+    f();
+  } catch (const pdt::Error& e) {
+    if (message) *message = e.what();
+    return e.code();
+  }
+  return std::nullopt;
+}
+
+std::vector<Point3> data_subsample(const std::string& rel, std::size_t n, std::uint64_t seed) {
+  const std::string path = shared_data(rel);
+  if (!std::filesystem::exists(path)) return {};
+  std::vector<Point3> pts = pdt::read_points(path);
+  shuffle(pts, seed);
+  if (pts.size() > n) pts.resize(n);
+  return pts;
+}
+
+// Sets environment variables for its lifetime; restores (unsets) them after.
+struct EnvGuard {
+  std::vector<std::string> names;
+  void set(const char* name, const char* value) {
+    ::setenv(name, value, 1);
+    names.emplace_back(name);
+  }
+  ~EnvGuard() {
+    for (const auto& n : names) ::unsetenv(n.c_str());
+  }
+};
+
+// -- a minimal coroutine type: eager, self-destroying, no result --------------
+struct Detached {
+  struct promise_type {
+    Detached get_return_object() noexcept { return {}; }
+    std::suspend_never initial_suspend() noexcept { return {}; }
+    std::suspend_never final_suspend() noexcept { return {}; }
+    void return_void() noexcept {}
+    void unhandled_exception() noexcept { std::terminate(); }  // bodies catch everything
+  };
+};
+
+// What coroutines running on worker threads report (Catch2 assertions are not
+// thread-safe, so they record here and the test thread checks).
+struct Tally {
+  std::atomic<int> finished{0};
+  std::mutex mutex;
+  std::vector<std::string> failures;
+  std::vector<Point3> kept;  // points left in the triangulation (with repetitions)
+  void fail(const std::string& s) {
+    std::lock_guard lock(mutex);
+    failures.push_back(s);
+  }
+  void keep(const Point3& p) {
+    std::lock_guard lock(mutex);
+    kept.push_back(p);
+  }
+};
+
+std::string failures_text(Tally& tally) {
+  std::lock_guard lock(tally.mutex);
+  std::string s;
+  for (std::size_t i = 0; i < tally.failures.size() && i < 10; ++i) s += tally.failures[i] + "\n";
+  return s;
+}
+
+// Inserts its points one by one with co_await; removes every third at once,
+// inserts every fifth twice (a duplicate) and undoes the second insertion.
+Detached churn(pdt::Engine& engine, std::vector<Point3> pts, Tally& tally) {
+  try {
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      const Point3 p = pts[i];
+      pdt::InsertResult r = co_await engine.insert(p);
+      if (!r.inserted || r.vertex == pdt::no_vertex || r.vertex == pdt::infinite_vertex) {
+        tally.fail("insert " + str(p) + ": inserted=" + std::to_string(r.inserted) + " vertex=" +
+                   std::to_string(r.vertex));
+        continue;
+      }
+      if (i % 5 == 0) {
+        pdt::InsertResult again = co_await engine.insert(p);
+        if (again.inserted || again.vertex != r.vertex)
+          tally.fail("duplicate " + str(p) + ": inserted=" + std::to_string(again.inserted) + " vertex " +
+                     std::to_string(again.vertex) + " vs " + std::to_string(r.vertex));
+        pdt::RemoveResult lowered = co_await engine.remove(r.vertex);
+        if (lowered != pdt::RemoveResult::multiplicity_lowered) tally.fail("duplicate removal " + str(p));
+      }
+      if (i % 3 == 0) {
+        pdt::RemoveResult rr = co_await engine.remove(r.vertex);
+        if (rr != pdt::RemoveResult::removed) tally.fail("remove " + str(p) + " did not remove");
+      } else {
+        tally.keep(p);
+      }
+    }
+  } catch (const std::exception& e) {
+    tally.fail(std::string("exception: ") + e.what());
+  }
+  tally.finished.fetch_add(1);
+}
+
+// Runs one awaited operation and records the pdt::Error code it threw, if any.
+struct AwaitOutcome {
+  std::atomic<bool> done{false};  // set last (release): code and message are written before
+  std::optional<pdt::ErrorCode> code;
+  std::string message;
+};
+
+Detached await_insert(pdt::Engine& engine, Point3 p, AwaitOutcome& out) {
+  try {
+    (void)co_await engine.insert(p);
+  } catch (const pdt::Error& e) {
+    out.code = e.code();
+    out.message = e.what();
+  }
+  out.done.store(true);
+}
+
+Detached await_remove(pdt::Engine& engine, pdt::VertexId v, AwaitOutcome& out) {
+  try {
+    (void)co_await engine.remove(v);
+  } catch (const pdt::Error& e) {
+    out.code = e.code();
+    out.message = e.what();
+  }
+  out.done.store(true);
+}
+
+Detached insert_then_remove(pdt::Engine& engine, Point3 p, std::atomic<pdt::VertexId>& vertex,
+                            std::atomic<int>& state) {
+  pdt::InsertResult r = co_await engine.insert(p);
+  vertex.store(r.vertex);
+  co_await engine.remove(r.vertex);
+  state.store(1);
+}
+
+// Waits (draining) until `cond` holds or `seconds` pass.
+template <class Cond>
+bool wait_for(pdt::Engine& e, Cond cond, double seconds = 60) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (!cond()) {
+    if (std::chrono::steady_clock::now() > until) return false;
+    e.drain();
+    std::this_thread::yield();
+  }
+  return true;
+}
+
+}  // namespace
+
+// =============================================================================
+// 1. Correct under concurrency
+// =============================================================================
+TEST_CASE("engine: every distribution and thread count gives the sequential and CGAL result", "[engine][tsan]") {
+  const std::size_t n = scaled(3000, 400);
+  for (pdt::Distribution dist : kDistributions) {
+    const pdt::OpStream s = generated(dist, n, 0.3, pdt::RemovalOrder::interleaved, 11);
+    REQUIRE(s.box.has_value());
+    pdt::Triangulation seq;
+    replay_sequential(seq, s);
+    for (unsigned threads : kThreadCounts) {
+      // Every thread count inside arena.execute; 4 and 16 also with the arena passed.
+      std::vector<ArenaMode> modes{ArenaMode::inside};
+      if (threads == 4 || threads == 16) modes.push_back(ArenaMode::passed);
+      for (ArenaMode mode : modes) {
+        INFO("distribution " << pdt::to_string(dist) << ", " << n << " points, " << threads << " workers, arena "
+                             << (mode == ArenaMode::inside ? "execute" : "passed"));
+        pdt::Triangulation t;
+        const EngineRun run = replay_engine(t, s, *s.box, options_with(threads), mode);
+        REQUIRE(run.threads == threads);
+        require_stats(run, s.ops.size(), threads);
+        REQUIRE(run.stats.global_operations > 0);  // the first points (dimension < 3)
+        require_result(t, s, &seq);
+      }
+    }
+  }
+}
+
+TEST_CASE("engine: repeated streams with removals lose no operation", "[engine][stress]") {
+  // Many short runs: races between a removal and an insertion next door show
+  // up as a failed operation (reported through its callback), an extra or
+  // missing vertex, or a livelock (the watchdog aborts).
+  const int rounds = kTsan ? 4 : 24;
+  for (int r = 0; r < rounds; ++r) {
+    const pdt::Distribution dist = r % 3 == 0 ? pdt::Distribution::normal : pdt::Distribution::uniform;
+    const pdt::OpStream s = generated(dist, scaled(4000, 500), 0.5, pdt::RemovalOrder::interleaved, 500 + r);
+    const unsigned threads = r % 2 ? 16 : 2;
+    INFO("round " << r << ", " << pdt::to_string(dist) << ", " << threads << " workers, seed " << 500 + r);
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, options_with(threads));
+    require_stats(run, s.ops.size(), threads);
+    REQUIRE(t.number_of_vertices() == s.insert_count() - s.remove_count());
+    require_valid(t);
+    if (r % 6 == 0) require_result(t, s);
+  }
+}
+
+TEST_CASE("engine: with threads = 0 the workers follow the arena's concurrency", "[engine]") {
+  const pdt::OpStream s = generated(pdt::Distribution::uniform, scaled(2000), 0.3, pdt::RemovalOrder::interleaved, 3);
+  for (int conc : {1, 2}) {
+    INFO("arena concurrency " << conc);
+    pdt::Triangulation t;
+    pdt::EngineOptions o = options_with(0);
+    const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, conc);
+    REQUIRE(run.threads == static_cast<unsigned>(conc));
+    unsigned b = 1;
+    while (b * b * b < 4 * run.threads) ++b;
+    REQUIRE(run.blocks == b);
+    require_stats(run, s.ops.size(), run.threads);
+    require_result(t, s);
+  }
+  {
+    INFO("no arena at all: the caller's default arena");
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, options_with(0), ArenaMode::caller_default);
+    REQUIRE(run.threads == static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency())));
+    require_stats(run, s.ops.size(), run.threads);
+    require_result(t, s);
+  }
+}
+
+TEST_CASE("engine: real point sets give CGAL's triangulation", "[engine][data][tsan]") {
+  struct Set {
+    const char* rel;
+    std::size_t n;
+  };
+  const Set sets[] = {{"scans/cgal_b9.ply", 12000}, {"degenerate/cgal_radar.xyz", 12000},
+                      {"scans/stanford_bunny_bun000.ply", 12000}};
+  for (const Set& set : sets) {
+    const std::size_t n = scaled(set.n, 1000);
+    std::vector<Point3> pts = data_subsample(set.rel, n, 2024);
+    if (pts.empty()) {
+      WARN("data file absent, skipped: " << shared_data(set.rel));
+      continue;
+    }
+    REQUIRE(pts.size() == n);
+    const pdt::OpStream s = stream_of(pts, 0.3, 99);
+    pdt::Triangulation seq;
+    replay_sequential(seq, s);
+    for (unsigned threads : {2u, 16u}) {
+      INFO(set.rel << ": " << pts.size() << " points, " << threads << " workers");
+      pdt::Triangulation t;
+      const EngineRun run = replay_engine(t, s, *s.box, options_with(threads),
+                                          threads == 16 ? ArenaMode::passed : ArenaMode::inside);
+      require_stats(run, s.ops.size(), threads);
+      require_result(t, s, &seq);
+    }
+  }
+}
+
+TEST_CASE("engine: integer lattice and exact cospherical points, removals after", "[engine][tsan]") {
+  // The lattice: masses of cospherical and coplanar subsets; the sphere: all
+  // points cospherical. Removal of half of them after all insertions.
+  for (pdt::Distribution dist : {pdt::Distribution::grid, pdt::Distribution::sphere}) {
+    const pdt::OpStream s = generated(dist, scaled(2500, 400), 0.5, pdt::RemovalOrder::after, 5);
+    pdt::Triangulation seq;
+    replay_sequential(seq, s);
+    for (unsigned threads : {3u, 16u}) {
+      INFO(pdt::to_string(dist) << ", " << threads << " workers");
+      pdt::Triangulation t;
+      const EngineRun run = replay_engine(t, s, *s.box, options_with(threads));
+      require_stats(run, s.ops.size(), threads);
+      require_result(t, s, &seq);
+    }
+  }
+}
+
+TEST_CASE("engine: a start with a big coplanar layer", "[engine][tsan]") {
+  // 400 points in the plane z = 0 first (dimension 2 for all of them: global
+  // operations), then random points in the cube, with removals interleaved.
+  // The engine does not keep the stream's order across workers, so the layer
+  // is drained before the rest is submitted (else a worker may raise the
+  // dimension with an off-plane point first).
+  const std::size_t layer = kTsan ? 150 : 400;
+  std::vector<Point3> pts = random_points(layer, 31);
+  for (auto& p : pts) p.z = 0;
+  for (const Point3& p : random_points(scaled(2600, 300), 32)) pts.push_back(p);
+  const pdt::OpStream s = stream_of(pts, 0.3, 33);
+  // The head: the layer's insertions and the removals among them, all in dimension 2.
+  std::size_t barrier = 0;
+  while (barrier < s.ops.size() &&
+         !(s.ops[barrier].kind == pdt::Operation::Kind::insert && s.ops[barrier].point.z != 0))
+    ++barrier;
+  REQUIRE(barrier >= layer);
+  pdt::Triangulation seq;
+  replay_sequential(seq, s);
+  for (unsigned threads : {1u, 4u, 16u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, options_with(threads), ArenaMode::inside, 2, barrier);
+    require_stats(run, s.ops.size(), threads);
+    // Every operation on the flat layer ran with the world stopped, and so
+    // did the one that built the first tetrahedra.
+    REQUIRE(run.stats_at_barrier.global_operations == barrier);
+    REQUIRE(run.stats.global_operations > barrier);
+    require_result(t, s, &seq);
+  }
+}
+
+TEST_CASE("engine: removals down to a coplanar set, to nothing, and back", "[engine][tsan]") {
+  const std::size_t layer = kTsan ? 120 : 300, above = kTsan ? 120 : 300;
+  std::vector<Point3> plane = random_points(layer, 41);
+  for (auto& p : plane) p.z = 0.25;
+  std::vector<Point3> cloud = random_points(above, 42);
+  for (auto& p : cloud) p.z = 0.3 + 0.7 * p.z;  // strictly above the plane
+  std::vector<Point3> all = plane;
+  all.insert(all.end(), cloud.begin(), cloud.end());
+  shuffle(all, 43);
+  const pdt::Box box{{0, 0, 0}, {1, 1, 1}};
+
+  for (unsigned threads : {2u, 16u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    tbb::task_arena arena(2);
+    ErrorSink errors;
+    arena.execute([&] {
+      pdt::Engine e(t, box, options_with(threads));
+      Watchdog watchdog(e, "coplanar removals");
+      std::vector<pdt::Engine::Ticket> ticket(all.size());
+      for (std::size_t i = 0; i < all.size(); ++i) ticket[i] = e.insert(all[i], errors.callback());
+      e.drain();
+      REQUIRE(t.dimension() == 3);
+      require_valid(t);
+      require_same_as_cgal(t, all);
+
+      // Remove every point off the plane: the last removals leave a coplanar
+      // set, which must run as a global operation (drop to dimension 2).
+      const std::uint64_t globals_before = e.stats().global_operations;
+      for (std::size_t i = 0; i < all.size(); ++i)
+        if (all[i].z != 0.25) e.remove_insertion(ticket[i], errors.callback());
+      e.drain();
+      errors.require_none();
+      REQUIRE(e.stats().global_operations > globals_before);
+      REQUIRE(t.dimension() == 2);
+      REQUIRE(t.number_of_vertices() == layer);
+      REQUIRE(t.number_of_finite_cells() == 0);
+      require_valid(t);
+      require_same_as_cgal(t, plane);
+
+      // Back to 3D: re-insert the cloud.
+      std::vector<pdt::Engine::Ticket> again(cloud.size());
+      for (std::size_t i = 0; i < cloud.size(); ++i) again[i] = e.insert(cloud[i], errors.callback());
+      e.drain();
+      REQUIRE(t.dimension() == 3);
+      require_valid(t);
+      std::vector<Point3> both = plane;
+      both.insert(both.end(), cloud.begin(), cloud.end());
+      require_same_as_cgal(t, both);
+
+      // Everything out: down through dimensions 2, 1, 0 to empty.
+      const std::uint64_t globals_mid = e.stats().global_operations;
+      for (std::size_t i = 0; i < all.size(); ++i)
+        if (all[i].z == 0.25) e.remove_insertion(ticket[i], errors.callback());
+      for (auto tk : again) e.remove_insertion(tk, errors.callback());
+      e.drain();
+      errors.require_none();
+      REQUIRE(e.stats().global_operations > globals_mid);
+      REQUIRE(t.number_of_vertices() == 0);
+      REQUIRE(t.dimension() == -1);
+      REQUIRE(t.number_of_cells() == 0);
+      require_valid(t);
+
+      // And from nothing again, through the low dimensions to 3D.
+      const std::uint64_t globals_empty = e.stats().global_operations;
+      const std::vector<Point3> fresh = random_points(scaled(1500, 300), 44);
+      for (const auto& p : fresh) e.insert(p, errors.callback());
+      e.drain();
+      errors.require_none();
+      REQUIRE(e.stats().global_operations >= globals_empty + 4);
+      require_valid(t);
+      require_same_as_cgal(t, fresh);
+      const pdt::EngineStats st = e.stats();
+      const std::size_t ops = 2 * all.size() + 2 * cloud.size() + fresh.size();
+      REQUIRE(st.total().completed == ops);
+    });
+  }
+}
+
+// =============================================================================
+// 2. The paper's extreme case (§3.3): all insertions, then all removals
+// =============================================================================
+TEST_CASE("engine: 16 workers insert 3000 normal points then remove them all", "[engine][tsan]") {
+  const std::size_t n = scaled(3000, 600);
+  SECTION("remove all: empty at the end") {
+    const pdt::OpStream s = generated(pdt::Distribution::normal, n, 1.0, pdt::RemovalOrder::after, 17);
+    REQUIRE(s.remove_count() == n);
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, options_with(16));
+    require_stats(run, s.ops.size(), 16);
+    REQUIRE(run.stats.global_operations > 0);  // the last removals go below dimension 3
+    REQUIRE(t.number_of_vertices() == 0);
+    REQUIRE(t.dimension() == -1);
+    REQUIRE(t.number_of_cells() == 0);
+    require_valid(t);
+  }
+  SECTION("remove two thirds: CGAL's triangulation of the rest") {
+    const pdt::OpStream s = generated(pdt::Distribution::normal, n, 2.0 / 3.0, pdt::RemovalOrder::after, 17);
+    pdt::Triangulation seq;
+    replay_sequential(seq, s);
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, options_with(16));
+    require_stats(run, s.ops.size(), 16);
+    require_result(t, s, &seq);
+  }
+  SECTION("remove all, each removal submitted right after its insertion") {
+    // The removal may reach its worker before the insertion is done: it waits
+    // (deferred), never fails.
+    std::vector<Point3> pts;
+    {
+      const pdt::OpStream g = generated(pdt::Distribution::normal, n, 0, pdt::RemovalOrder::after, 18);
+      for (const auto& op : g.ops) pts.push_back(op.point);
+    }
+    pdt::Triangulation t;
+    tbb::task_arena arena(2);
+    std::atomic<std::uint64_t> errors{0};
+    pdt::EngineStats st;
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(16));
+      auto count_errors = [&](const pdt::OpResult& r) {
+        if (r.error) errors.fetch_add(1);
+      };
+      for (const auto& p : pts) e.remove_insertion(e.insert(p, count_errors), count_errors);
+      e.drain();
+      st = e.stats();
+    });
+    REQUIRE(errors.load() == 0);
+    REQUIRE(st.total().completed == 2 * n);
+    REQUIRE(t.number_of_vertices() == 0);
+    require_valid(t);
+  }
+}
+
+TEST_CASE("engine: the contention manager suspends a worker that keeps rolling back", "[engine][tsan]") {
+  // Deterministic contention: the test itself holds one vertex's lock, so
+  // removing that vertex rolls back until it lets go. With u- = u+ = 1 and a
+  // window of 1 every rollback is a bad window: the worker must go to sleep as
+  // soon as another worker is running, and the others must still finish.
+  pdt::Triangulation t;
+  const std::vector<Point3> base = random_points(scaled(2000, 400), 51);
+  insert_all(t, base);
+  const pdt::VertexId victim = t.nearest_vertex({0.5, 0.5, 0.5});
+  REQUIRE(t.is_vertex(victim));
+  const Point3 victim_point = t.point(victim);
+  const std::vector<Point3> more = random_points(scaled(3000, 600), 52);
+
+  pdt::EngineOptions o = options_with(8);
+  o.contention_low = 1.0;
+  o.contention_high = 1.0;
+  o.contention_window = 1;
+  pdt::OpContext holder(999, true);
+  ErrorSink errors;
+  bool slept = false, removed_while_held = false;
+  std::atomic<int> removal_done{0};
+  pdt::EngineStats st;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
+    REQUIRE(t.impl().lock_exclusive(holder, victim));
+    e.remove(victim, [&](const pdt::OpResult& r) { removal_done.store(r.error ? 2 : 1); });
+    for (const auto& p : more) e.insert(p, errors.callback());
+    // Wait (at most 20 s) until the contention manager has put someone to sleep.
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (e.stats().total().sleeps == 0 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+    slept = e.stats().total().sleeps > 0;
+    removed_while_held = removal_done.load() != 0;
+    t.impl().release_all(holder);
+    e.drain();
+    st = e.stats();
+  });
+  REQUIRE_FALSE(removed_while_held);
+  REQUIRE(slept);
+  REQUIRE(removal_done.load() == 1);
+  const pdt::WorkerStats total = st.total();
+  REQUIRE(total.rollbacks > 0);
+  REQUIRE(total.max_rollbacks_per_completed > 0);
+  REQUIRE(total.completed == more.size() + 1);
+  REQUIRE(total.attempts == total.completed + total.rollbacks + total.deferred);
+  REQUIRE(total.seconds_asleep >= 0);
+  errors.require_none();
+  // (The victim's id may have been recycled by a later insertion: look for its point.)
+  const std::vector<Point3> left = surviving_points(t);
+  REQUIRE(std::find(left.begin(), left.end(), victim_point) == left.end());
+  require_valid(t);
+  std::vector<Point3> expected;
+  for (const auto& p : base)
+    if (!(p == victim_point)) expected.push_back(p);
+  expected.insert(expected.end(), more.begin(), more.end());
+  require_same_as_cgal(t, expected);
+}
+
+// =============================================================================
+// 3. The coroutine API
+// =============================================================================
+TEST_CASE("engine: co_await insert / remove from many concurrent coroutines", "[engine][tsan]") {
+  const std::size_t per = scaled(400, 100);
+  const int coroutines = 12;
+  std::vector<std::vector<Point3>> sets;
+  for (int c = 0; c < coroutines; ++c) sets.push_back(random_points(per, 100 + c));
+  for (unsigned threads : {1u, 4u, 16u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    Tally tally;
+    tbb::task_arena arena(2);
+    bool all_finished = false;
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(threads));
+      for (int c = 0; c < coroutines; ++c) churn(e, sets[c], tally);
+      all_finished = wait_for(e, [&] { return tally.finished.load() == coroutines; });
+    });
+    REQUIRE(all_finished);
+    INFO(failures_text(tally));
+    REQUIRE(tally.failures.empty());
+    require_valid(t);
+    require_same_as_cgal(t, tally.kept);
+    REQUIRE(total_multiplicity(t) == tally.kept.size());
+  }
+}
+
+TEST_CASE("engine: coroutines started from threads outside the arena", "[engine][tsan]") {
+  pdt::Triangulation t;
+  Tally tally;
+  tbb::task_arena arena(2);
+  const std::size_t per = scaled(300, 80);
+  {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(6), &arena);
+    std::vector<std::thread> threads;
+    for (int c = 0; c < 4; ++c)
+      threads.emplace_back([&, c] { churn(e, random_points(per, 300 + c), tally); });
+    for (auto& th : threads) th.join();
+    REQUIRE(wait_for(e, [&] { return tally.finished.load() == 4; }));
+  }  // the destructor drains
+  INFO(failures_text(tally));
+  REQUIRE(tally.failures.empty());
+  require_valid(t);
+  require_same_as_cgal(t, tally.kept);
+}
+
+TEST_CASE("engine: co_await reports bad points and dead vertices as pdt::Error", "[engine]") {
+  pdt::Triangulation t;
+  const std::vector<Point3> base = random_points(200, 61);
+  insert_all(t, base);
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(4));
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double inf = std::numeric_limits<double>::infinity();
+
+    for (Point3 bad : {Point3{nan, 0, 0}, Point3{0.5, inf, 0.5}, Point3{0.5, 0.5, -inf}}) {
+      AwaitOutcome out;
+      await_insert(e, bad, out);  // fails at once: the coroutine never suspends
+      REQUIRE(out.done.load());
+      REQUIRE(out.code == pdt::ErrorCode::non_finite_coordinate);
+    }
+    for (Point3 outside : {Point3{1.5, 0.5, 0.5}, Point3{0.5, -1e-300, 0.5}, Point3{0.5, 0.5, 1.0000001}}) {
+      AwaitOutcome out;
+      await_insert(e, outside, out);
+      REQUIRE(out.done.load());
+      REQUIRE(out.code == pdt::ErrorCode::outside_domain);
+      REQUIRE(out.message.find("domain") != std::string::npos);
+    }
+    // A point on the box boundary is inside the domain.
+    {
+      AwaitOutcome out;
+      await_insert(e, {1.0, 0.0, 0.5}, out);
+      REQUIRE(wait_for(e, [&] { return out.done.load(); }));
+      REQUIRE_FALSE(out.code.has_value());
+    }
+    // remove: the infinite vertex, ids never issued, a vertex removed before.
+    for (pdt::VertexId v : {pdt::infinite_vertex, pdt::VertexId{123456789}, pdt::no_vertex}) {
+      AwaitOutcome out;
+      await_remove(e, v, out);
+      REQUIRE(out.done.load());
+      REQUIRE(out.code == pdt::ErrorCode::unknown_vertex);
+    }
+    std::atomic<pdt::VertexId> v{pdt::no_vertex};
+    std::atomic<int> state{0};
+    insert_then_remove(e, {0.123, 0.456, 0.789}, v, state);
+    REQUIRE(wait_for(e, [&] { return state.load() == 1; }));
+    REQUIRE(v.load() != pdt::no_vertex);
+    AwaitOutcome dead;
+    await_remove(e, v.load(), dead);
+    REQUIRE(wait_for(e, [&] { return dead.done.load(); }));
+    REQUIRE(dead.code == pdt::ErrorCode::unknown_vertex);
+    e.drain();
+  });
+  // Nothing the failed operations named was changed.
+  std::vector<Point3> expected = base;
+  expected.push_back({1.0, 0.0, 0.5});
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+}
+
+// =============================================================================
+// 4. Callback form
+// =============================================================================
+TEST_CASE("engine: callbacks report each insertion's result by ticket", "[engine][tsan]") {
+  const std::vector<Point3> pts = random_points(scaled(3000, 500), 71);
+  pdt::Triangulation t;
+  std::vector<pdt::OpResult> results(pts.size());
+  std::vector<std::atomic<int>> calls(pts.size());
+  std::atomic<std::size_t> callbacks{0};
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(8));
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      const pdt::Engine::Ticket tk = e.insert(pts[i], [&, i](const pdt::OpResult& r) {
+        results[i] = r;  // slot i is written by this callback only
+        calls[i].fetch_add(1);
+        callbacks.fetch_add(1);
+      });
+      REQUIRE(tk == i);
+    }
+    e.drain();
+  });
+  REQUIRE(callbacks.load() == pts.size());
+  std::vector<pdt::VertexId> seen;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    REQUIRE(calls[i].load() == 1);
+    REQUIRE_FALSE(results[i].error);
+    REQUIRE(results[i].insert.inserted);
+    REQUIRE(t.is_vertex(results[i].insert.vertex));
+    REQUIRE(t.point(results[i].insert.vertex) == pts[i]);
+    seen.push_back(results[i].insert.vertex);
+  }
+  std::sort(seen.begin(), seen.end());
+  REQUIRE(std::adjacent_find(seen.begin(), seen.end()) == seen.end());
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
+TEST_CASE("engine: several threads submit at once", "[engine][tsan]") {
+  const int submitters = 4;
+  const std::size_t per = scaled(1500, 250);
+  std::vector<std::vector<Point3>> sets;
+  for (int s = 0; s < submitters; ++s) sets.push_back(random_points(per, 80 + s));
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  std::mutex m;
+  std::vector<pdt::Engine::Ticket> tickets;
+  std::atomic<int> errors{0};
+  {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(16), &arena);
+    std::vector<std::thread> threads;
+    for (int s = 0; s < submitters; ++s)
+      threads.emplace_back([&, s] {
+        std::vector<pdt::Engine::Ticket> mine;
+        for (std::size_t i = 0; i < per; ++i) {
+          mine.push_back(e.insert(sets[s][i], [&](const pdt::OpResult& r) {
+            if (r.error) errors.fetch_add(1);
+          }));
+          // Undo every other insertion of this thread, right away.
+          if (i % 2 == 1) e.remove_insertion(mine[i - 1], [&](const pdt::OpResult& r) {
+              if (r.error) errors.fetch_add(1);
+            });
+        }
+        std::lock_guard lock(m);
+        tickets.insert(tickets.end(), mine.begin(), mine.end());
+      });
+    for (auto& th : threads) th.join();
+    e.drain();
+    const pdt::EngineStats st = e.stats();
+    REQUIRE(st.total().completed == submitters * (per + per / 2));
+  }
+  REQUIRE(errors.load() == 0);
+  // Tickets are unique and number the insertions from 0.
+  std::sort(tickets.begin(), tickets.end());
+  REQUIRE(tickets.size() == submitters * per);
+  for (std::size_t i = 0; i < tickets.size(); ++i) REQUIRE(tickets[i] == i);
+  std::vector<Point3> expected;
+  for (int s = 0; s < submitters; ++s)
+    for (std::size_t i = 0; i < per; ++i)
+      if (i % 2 == 1 || i + 1 == per) expected.push_back(sets[s][i]);
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+}
+
+TEST_CASE("engine: duplicates, remove_insertion and immediate errors of the callback form", "[engine]") {
+  pdt::Triangulation t;
+  const std::vector<Point3> base = random_points(500, 91);
+  insert_all(t, base);
+  const std::size_t nv = t.number_of_vertices();
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(4));
+    const Point3 p{0.31, 0.62, 0.93};
+    pdt::OpResult r1, r2;
+    const auto t1 = e.insert(p, [&](const pdt::OpResult& r) { r1 = r; });
+    const auto t2 = e.insert(p, [&](const pdt::OpResult& r) { r2 = r; });
+    REQUIRE(t1 == 0);
+    REQUIRE(t2 == 1);
+    e.drain();
+    REQUIRE_FALSE(r1.error);
+    REQUIRE_FALSE(r2.error);
+    REQUIRE(r1.insert.vertex == r2.insert.vertex);
+    REQUIRE(r1.insert.inserted != r2.insert.inserted);  // exactly one of them created the vertex
+    const pdt::VertexId v = r1.insert.vertex;
+    REQUIRE(t.multiplicity(v) == 2);
+    REQUIRE(t.number_of_vertices() == nv + 1);
+
+    pdt::OpResult u1;
+    e.remove_insertion(t1, [&](const pdt::OpResult& r) { u1 = r; });
+    e.drain();
+    REQUIRE_FALSE(u1.error);
+    REQUIRE(u1.remove == pdt::RemoveResult::multiplicity_lowered);
+    REQUIRE(t.is_vertex(v));
+    REQUIRE(t.multiplicity(v) == 1);
+    // Undoing a ticket twice, or one never issued, fails at once.
+    REQUIRE(error_of([&] { e.remove_insertion(t1); }) == pdt::ErrorCode::unknown_vertex);
+    REQUIRE(error_of([&] { e.remove_insertion(12345); }) == pdt::ErrorCode::unknown_vertex);
+    REQUIRE(error_of([&] { e.remove_insertion(t2 + 1); }) == pdt::ErrorCode::unknown_vertex);
+
+    pdt::OpResult u2;
+    e.remove_insertion(t2, [&](const pdt::OpResult& r) { u2 = r; });
+    e.drain();
+    REQUIRE_FALSE(u2.error);
+    REQUIRE(u2.remove == pdt::RemoveResult::removed);
+    REQUIRE_FALSE(t.is_vertex(v));
+    REQUIRE(t.number_of_vertices() == nv);
+    REQUIRE(error_of([&] { e.remove_insertion(t2); }) == pdt::ErrorCode::unknown_vertex);
+
+    // Bad points are refused at once and submit nothing (no ticket used).
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    bool called = false;
+    std::string msg;
+    REQUIRE(error_of([&] { e.insert({nan, 0.5, 0.5}, [&](const pdt::OpResult&) { called = true; }); }, &msg) ==
+            pdt::ErrorCode::non_finite_coordinate);
+    REQUIRE(error_of([&] { e.insert({0.5, 0.5, std::numeric_limits<double>::infinity()}, {}); }) ==
+            pdt::ErrorCode::non_finite_coordinate);
+    REQUIRE(error_of([&] { e.insert({0.5, 2.0, 0.5}, [&](const pdt::OpResult&) { called = true; }); }, &msg) ==
+            pdt::ErrorCode::outside_domain);
+    REQUIRE(error_of([&] { e.insert({-0.0001, 0.5, 0.5}, {}); }) == pdt::ErrorCode::outside_domain);
+    // Engine::remove of dead or impossible vertices fails at once too.
+    REQUIRE(error_of([&] { e.remove(v, {}); }) == pdt::ErrorCode::unknown_vertex);
+    REQUIRE(error_of([&] { e.remove(pdt::infinite_vertex, {}); }) == pdt::ErrorCode::unknown_vertex);
+    REQUIRE(error_of([&] { e.remove(pdt::no_vertex, {}); }) == pdt::ErrorCode::unknown_vertex);
+    e.drain();
+    REQUIRE_FALSE(called);
+    REQUIRE(t.number_of_vertices() == nv);
+    const auto next = e.insert({0.2, 0.2, 0.2}, {});
+    REQUIRE(next == t2 + 1);  // the refused insertions took no ticket
+    e.drain();
+    const pdt::EngineStats st = e.stats();
+    REQUIRE(st.total().completed == 5);  // 2 inserts, 2 undos, 1 insert
+  });
+  std::vector<Point3> expected = base;
+  expected.push_back({0.2, 0.2, 0.2});
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+}
+
+// =============================================================================
+// 5. Options
+// =============================================================================
+TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "[engine]") {
+  for (const char* n : {"PDT_THREADS", "PDT_BLOCKS_PER_AXIS", "PDT_CONTENTION_LOW", "PDT_CONTENTION_HIGH",
+                        "PDT_CONTENTION_WINDOW", "PDT_GRID_SLOTS"})
+    ::unsetenv(n);
+  SECTION("unset: the defaults given") {
+    pdt::EngineOptions d;
+    d.threads = 7;
+    d.contention_window = 5;
+    const pdt::EngineOptions o = pdt::EngineOptions::from_environment(d);
+    REQUIRE(o.threads == 7);
+    REQUIRE(o.contention_window == 5);
+    REQUIRE(o.blocks_per_axis == 0);
+    REQUIRE(o.contention_low == 0.7);
+    REQUIRE(o.contention_high == 0.9);
+    REQUIRE(o.grid_slots == (std::size_t{1} << 21));
+    const pdt::EngineOptions plain = pdt::EngineOptions::from_environment();
+    REQUIRE(plain.threads == 0);
+  }
+  SECTION("every variable") {
+    EnvGuard env;
+    env.set("PDT_THREADS", "6");
+    env.set("PDT_BLOCKS_PER_AXIS", "5");
+    env.set("PDT_CONTENTION_LOW", "0.25");
+    env.set("PDT_CONTENTION_HIGH", "0.5");
+    env.set("PDT_CONTENTION_WINDOW", "64");
+    env.set("PDT_GRID_SLOTS", "4096");
+    const pdt::EngineOptions o = pdt::EngineOptions::from_environment();
+    REQUIRE(o.threads == 6);
+    REQUIRE(o.blocks_per_axis == 5);
+    REQUIRE(o.contention_low == 0.25);
+    REQUIRE(o.contention_high == 0.5);
+    REQUIRE(o.contention_window == 64);
+    REQUIRE(o.grid_slots == 4096);
+    // An engine built from them reports them.
+    pdt::Triangulation t;
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}});  // default argument: from_environment()
+      REQUIRE(e.threads() == 6);
+      REQUIRE(e.blocks_per_axis() == 5);
+      REQUIRE(e.options().contention_low == 0.25);
+      REQUIRE(e.options().contention_window == 64);
+      for (const auto& p : random_points(300, 3)) e.insert(p, {});
+      e.drain();
+      REQUIRE(e.stats().workers.size() == 6);
+    });
+    require_same_as_cgal(t, random_points(300, 3));
+  }
+  SECTION("a bad value is refused, naming the variable") {
+    const std::pair<const char*, const char*> bad[] = {
+        {"PDT_THREADS", "abc"},          {"PDT_THREADS", "-1"},        {"PDT_THREADS", "2.5"},
+        {"PDT_BLOCKS_PER_AXIS", "4x"},   {"PDT_CONTENTION_LOW", "nan"}, {"PDT_CONTENTION_HIGH", "-0.5"},
+        {"PDT_CONTENTION_WINDOW", "1e99"}, {"PDT_GRID_SLOTS", " "},     {"PDT_CONTENTION_LOW", "inf"}};
+    for (const auto& [name, value] : bad) {
+      EnvGuard env;
+      env.set(name, value);
+      std::string msg;
+      INFO(name << "='" << value << "'");
+      REQUIRE(error_of([] { (void)pdt::EngineOptions::from_environment(); }, &msg) == pdt::ErrorCode::invalid_argument);
+      INFO(msg);
+      REQUIRE(msg.find(name) != std::string::npos);
+    }
+  }
+}
+
+TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
+  pdt::Triangulation t;
+  const pdt::Box unit{{0, 0, 0}, {1, 1, 1}};
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::EngineOptions o = options_with(2);
+    o.contention_low = 0.9;
+    o.contention_high = 0.5;
+    REQUIRE(error_of([&] { pdt::Engine e(t, unit, o); }) == pdt::ErrorCode::invalid_argument);
+    o = options_with(2);
+    o.contention_high = 1.5;
+    REQUIRE(error_of([&] { pdt::Engine e(t, unit, o); }) == pdt::ErrorCode::invalid_argument);
+    o = options_with(2);
+    o.contention_low = -0.1;
+    REQUIRE(error_of([&] { pdt::Engine e(t, unit, o); }) == pdt::ErrorCode::invalid_argument);
+
+    for (pdt::Box b : {pdt::Box{{0, 0, 1}, {1, 1, 0}}, pdt::Box{{2, 0, 0}, {1, 1, 1}}, pdt::Box{{0, 3, 0}, {1, 1, 1}},
+                       pdt::Box{{0, 0, 0}, {std::numeric_limits<double>::quiet_NaN(), 1, 1}},
+                       pdt::Box{{0, 0, 0}, {std::numeric_limits<double>::infinity(), 1, 1}}}) {
+      REQUIRE(error_of([&] { pdt::Engine e(t, b, options_with(2)); }) == pdt::ErrorCode::invalid_argument);
+    }
+    // A degenerate (flat) box is allowed: lo == hi on an axis.
+    REQUIRE_FALSE(error_of([&] { pdt::Engine e(t, pdt::Box{{0, 0, 0}, {1, 1, 0}}, options_with(2)); }));
+
+    for (auto [threads, blocks, want_blocks] : {std::tuple{1u, 0u, 2u}, std::tuple{5u, 0u, 3u},
+                                                std::tuple{16u, 0u, 4u}, std::tuple{3u, 7u, 7u},
+                                                std::tuple{16u, 1u, 1u}}) {
+      pdt::EngineOptions oo = options_with(threads);
+      oo.blocks_per_axis = blocks;
+      pdt::Engine e(t, unit, oo);
+      REQUIRE(e.threads() == threads);
+      REQUIRE(e.blocks_per_axis() == want_blocks);
+      REQUIRE(e.options().threads == threads);
+      REQUIRE(e.stats().workers.size() == threads);
+    }
+  });
+  REQUIRE(t.number_of_vertices() == 0);
+}
+
+TEST_CASE("engine: unusual block layouts still give the exact result", "[engine][tsan]") {
+  // One block for 8 workers (7 idle), more blocks than needed, a flat domain axis.
+  const pdt::OpStream s = generated(pdt::Distribution::uniform, scaled(2000, 300), 0.3, pdt::RemovalOrder::interleaved, 9);
+  for (unsigned blocks : {1u, 9u}) {
+    INFO(blocks << " blocks per axis");
+    pdt::EngineOptions o = options_with(8);
+    o.blocks_per_axis = blocks;
+    o.contention_window = 4;
+    pdt::Triangulation t;
+    const EngineRun run = replay_engine(t, s, *s.box, o);
+    REQUIRE(run.blocks == blocks);
+    require_stats(run, s.ops.size(), 8);
+    if (blocks == 1) {
+      // Everything goes to worker 0.
+      REQUIRE(run.stats.workers[0].completed == s.ops.size());
+    }
+    require_result(t, s);
+  }
+}
+
+// =============================================================================
+// 6. Determinism
+// =============================================================================
+TEST_CASE("engine: 1 and 16 workers give identical tetrahedra", "[engine][tsan]") {
+  for (pdt::Distribution dist : {pdt::Distribution::normal, pdt::Distribution::grid}) {
+    const pdt::OpStream s = generated(dist, scaled(4000, 500), 0.3, pdt::RemovalOrder::interleaved, 123);
+    pdt::Triangulation one, many;
+    replay_engine(one, s, *s.box, options_with(1));
+    replay_engine(many, s, *s.box, options_with(16));
+    std::vector<Point3> pts;
+    for (const auto& op : s.ops)
+      if (op.kind == pdt::Operation::Kind::insert) pts.push_back(op.point);
+    const PointIndex idx = make_point_index(pts);
+    const TetList a = canonical_tets(one, idx), b = canonical_tets(many, idx);
+    INFO(pdt::to_string(dist));
+    REQUIRE(!a.empty());
+    const bool same = a == b;
+    INFO((same ? std::string() : describe_mismatch(b, a, pts)));
+    REQUIRE(same);
+    REQUIRE(surviving_points(one).size() == surviving_points(many).size());
+    require_valid(many);
+  }
+}
+
+// =============================================================================
+// 7. After the engine
+// =============================================================================
+TEST_CASE("engine: the triangulation is usable sequentially after the engine is gone", "[engine][tsan]") {
+  const pdt::OpStream s = generated(pdt::Distribution::uniform, scaled(3000, 400), 0.3, pdt::RemovalOrder::interleaved, 5);
+  pdt::Triangulation t;
+  replay_engine(t, s, *s.box, options_with(16));
+  require_result(t, s);
+
+  // Continue sequentially: insert more (also outside the old domain), remove a third.
+  std::vector<Point3> expected = survivors(s);
+  std::vector<Point3> more = random_points(scaled(2000, 300), 6, -0.5, 1.5);
+  for (const auto& p : more) {
+    const pdt::InsertResult r = t.insert(p);
+    REQUIRE(r.inserted);
+    REQUIRE(t.point(r.vertex) == p);
+  }
+  expected.insert(expected.end(), more.begin(), more.end());
+  require_valid(t);
+  std::vector<pdt::VertexId> vs = t.vertices();
+  shuffle(vs, 8);
+  vs.resize(vs.size() / 3);
+  std::uint64_t removals = 0;
+  for (pdt::VertexId v : vs) {
+    const Point3 p = t.point(v);
+    const std::uint32_t m = t.multiplicity(v);
+    for (std::uint32_t k = 0; k < m; ++k) t.remove(v), ++removals;
+    REQUIRE_FALSE(t.is_vertex(v));
+    expected.erase(std::remove(expected.begin(), expected.end(), p), expected.end());
+  }
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+  // The workers' statistics were folded into the triangulation's.
+  REQUIRE(t.stats().insertions == s.insert_count() + more.size());
+  REQUIRE(t.stats().removals == s.remove_count() + removals);
+
+  // And a second engine over the same triangulation, then sequential again.
+  tbb::task_arena arena(2);
+  std::vector<Point3> extra = random_points(scaled(1000, 200), 9, -0.5, 1.5);
+  arena.execute([&] {
+    pdt::Engine e(t, {{-0.5, -0.5, -0.5}, {1.5, 1.5, 1.5}}, options_with(4));
+    for (const auto& p : extra) e.insert(p, {});
+  });  // destroyed without an explicit drain: the destructor drains
+  expected.insert(expected.end(), extra.begin(), extra.end());
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+  for (pdt::VertexId v : t.vertices()) t.remove(v);  // all the way down, sequentially
+  REQUIRE(t.number_of_vertices() == 0);
+  REQUIRE(t.dimension() == -1);
+  require_valid(t);
+}

@@ -35,7 +35,7 @@ step "generate $points uniform points, 10% interleaved removals" \
   build/pdt gen --dist uniform --points "$points" --remove-fraction 0.1 --interleaved --out "$stream"
 step "replay the stream (threads: $threads, 0 = all cores) and validate" \
   build/pdt run "$stream" --threads "$threads" --validate
-step "sequential benchmark" build/bench_sequential --points "$points"
+step "the same workload against CGAL (sequential benchmark)" build/bench_sequential --points "$points" --dists uniform
 current_step=""
 echo
 echo "demo: all steps passed"

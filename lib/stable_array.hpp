@@ -118,20 +118,24 @@ class StableArray {
   StableArray(const StableArray&) = delete;
   StableArray& operator=(const StableArray&) = delete;
 
-  T& operator[](std::size_t i) { return table_[i >> chunk_bits].load(std::memory_order_relaxed)[i & (chunk_elems - 1)]; }
+  // Acquire: pairs with the CAS that published the chunk, so its zeroed
+  // contents are visible to a thread that found the index below size().
+  T& operator[](std::size_t i) { return table_[i >> chunk_bits].load(std::memory_order_acquire)[i & (chunk_elems - 1)]; }
   const T& operator[](std::size_t i) const {
-    return table_[i >> chunk_bits].load(std::memory_order_relaxed)[i & (chunk_elems - 1)];
+    return table_[i >> chunk_bits].load(std::memory_order_acquire)[i & (chunk_elems - 1)];
   }
   std::size_t size() const { return size_.load(std::memory_order_acquire); }
   std::size_t capacity() const { return capacity_; }
 
-  std::size_t grow(std::size_t count, bool construct = true) {  // see the pool build
-    std::size_t first = size_.fetch_add(count, std::memory_order_acq_rel);
-    if (first + count > capacity_) {
-      size_.fetch_sub(count, std::memory_order_acq_rel);
-      throw std::bad_alloc();
-    }
-    cover(first, first + count);
+  // As in the pool build, except that the chunks must exist before the new
+  // size is published (another thread may index anything below size()): claim
+  // [cur, cur + count) by CAS only after covering it.
+  std::size_t grow(std::size_t count, bool construct = true) {
+    std::size_t first = size_.load(std::memory_order_acquire);
+    do {
+      if (first + count > capacity_) throw std::bad_alloc();
+      cover(first, first + count);
+    } while (!size_.compare_exchange_weak(first, first + count, std::memory_order_acq_rel));
     if (construct)
       for (std::size_t i = first; i < first + count; ++i) new (&(*this)[i]) T();
     return first;
@@ -139,9 +143,10 @@ class StableArray {
   void ensure_size(std::size_t n) {
     if (n > capacity_) throw std::bad_alloc();
     std::size_t cur = size_.load(std::memory_order_acquire);
+    if (cur >= n) return;
+    cover(cur, n);
     while (cur < n && !size_.compare_exchange_weak(cur, n, std::memory_order_acq_rel)) {
     }
-    cover(0, n);
   }
   void clear(bool release = true) {
     size_.exchange(0);

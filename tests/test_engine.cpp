@@ -761,6 +761,7 @@ TEST_CASE("engine: 16 workers insert 3000 normal points then remove them all", "
     pdt::EngineStats st;
     arena.execute([&] {
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(16));
+      Watchdog watchdog(e, "remove right after insert");
       auto count_errors = [&](const pdt::OpResult& r) {
         if (r.error) errors.fetch_add(1);
       };
@@ -849,6 +850,7 @@ TEST_CASE("engine: co_await insert / remove from many concurrent coroutines", "[
     bool all_finished = false;
     arena.execute([&] {
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(threads));
+      Watchdog watchdog(e, "coroutines");
       for (int c = 0; c < coroutines; ++c) churn(e, sets[c], tally);
       all_finished = wait_for(e, [&] { return tally.finished.load() == coroutines; });
     });
@@ -868,6 +870,7 @@ TEST_CASE("engine: coroutines started from threads outside the arena", "[engine]
   const std::size_t per = scaled(300, 80);
   {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(6), &arena);
+    Watchdog watchdog(e, "coroutines from threads");
     std::vector<std::thread> threads;
     for (int c = 0; c < 4; ++c)
       threads.emplace_back([&, c] { churn(e, random_points(per, 300 + c), tally); });
@@ -947,6 +950,7 @@ TEST_CASE("engine: callbacks report each insertion's result by ticket", "[engine
   tbb::task_arena arena(2);
   arena.execute([&] {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(8));
+    Watchdog watchdog(e, "callbacks");
     for (std::size_t i = 0; i < pts.size(); ++i) {
       const pdt::Engine::Ticket tk = e.insert(pts[i], [&, i](const pdt::OpResult& r) {
         results[i] = r;  // slot i is written by this callback only
@@ -985,6 +989,7 @@ TEST_CASE("engine: several threads submit at once", "[engine][tsan]") {
   std::atomic<int> errors{0};
   {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(16), &arena);
+    Watchdog watchdog(e, "several submitters");
     std::vector<std::thread> threads;
     for (int s = 0; s < submitters; ++s)
       threads.emplace_back([&, s] {

@@ -130,6 +130,12 @@ struct EngineState {
   void submit(QueuedOp* op);
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
   bool wake_one();
+  void wake_locked(Worker& w);  // takes w off `sleepers` (caller holds sleep_mutex)
+  QueuedOp* make_insert(const Point3& p);
+  QueuedOp* make_remove(VertexId v);
+  // Runs one operation's kernel call in ctx; the removal of a ticket uses the
+  // vertex its insertion produced.
+  OpStatus run_op(OpContext& ctx, QueuedOp& op, OpResult& r, std::uint64_t& stamp);
   void execute(Worker& w, QueuedOp* op);
   void run_global(Worker& w, QueuedOp* op);
   void complete(Worker& w, QueuedOp* op, OpResult& r, std::uint64_t stamp);
@@ -265,6 +271,29 @@ void EngineState::resume(Worker& w) {
   spawn([h] { h.resume(); });
 }
 
+QueuedOp* EngineState::make_insert(const Point3& p) {
+  check_point(p);
+  QueuedOp* op = acquire_op();
+  op->kind = OpKind::insert;
+  op->point = p;
+  op->ticket = static_cast<std::uint64_t>(tickets.grow_by(1) - tickets.begin());
+  tickets[op->ticket].point = p;
+  return op;
+}
+
+QueuedOp* EngineState::make_remove(VertexId v) {
+  // The vertex must be live: its caller got it from a completed insertion.
+  if (v == 0 || v >= impl.verts.size() || impl.verts[v].multiplicity == 0)
+    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
+  QueuedOp* op = acquire_op();
+  op->kind = OpKind::remove;
+  op->vertex = v;
+  op->stamp = impl.verts[v].stamp;
+  const auto& p = impl.verts[v].p;
+  op->point = {p.x(), p.y(), p.z()};
+  return op;
+}
+
 QueuedOp* EngineState::acquire_op() {
   QueuedOp* op = nullptr;
   if (free_ops.pop(op)) return op;
@@ -291,17 +320,20 @@ void EngineState::submit(QueuedOp* op) {
     resume(w);
   } else if (expect == sleeping && active.load() == 0) {
     // Nobody runs to wake it: do it here.
-    std::lock_guard lock(sleep_mutex);
-    auto it = std::find(sleepers.begin(), sleepers.end(), &w);
-    if (it != sleepers.end()) {
-      sleepers.erase(it);
-      w.seconds_asleep.store(w.seconds_asleep.load() +
-                             std::chrono::duration<double>(std::chrono::steady_clock::now() - w.slept_at).count());
-      w.window_attempts = w.window_completed = 0;
-      w.phase.store(running);
-      resume(w);
-    }
+    std::unique_lock lock(sleep_mutex);
+    if (std::find(sleepers.begin(), sleepers.end(), &w) == sleepers.end()) return;
+    wake_locked(w);
+    lock.unlock();
+    resume(w);
   }
+}
+
+void EngineState::wake_locked(Worker& w) {
+  sleepers.erase(std::find(sleepers.begin(), sleepers.end(), &w));
+  w.seconds_asleep.store(w.seconds_asleep.load() +
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - w.slept_at).count());
+  w.window_attempts = w.window_completed = 0;  // the manager is memoryless (§3.3)
+  w.phase.store(running);
 }
 
 bool EngineState::wake_one() {
@@ -310,11 +342,7 @@ bool EngineState::wake_one() {
     std::lock_guard lock(sleep_mutex);
     if (sleepers.empty()) return false;
     w = sleepers.back();
-    sleepers.pop_back();
-    w->seconds_asleep.store(w->seconds_asleep.load() +
-                            std::chrono::duration<double>(std::chrono::steady_clock::now() - w->slept_at).count());
-    w->window_attempts = w->window_completed = 0;  // the manager is memoryless (§3.3)
-    w->phase.store(running);
+    wake_locked(*w);
   }
   resume(*w);
   return true;
@@ -330,6 +358,27 @@ void EngineState::judge(Worker& w, bool* want_sleep) {
     wake_one();
 }
 
+OpStatus EngineState::run_op(OpContext& ctx, QueuedOp& op, OpResult& r, std::uint64_t& stamp) {
+  switch (op.kind) {
+    case OpKind::insert: {
+      const Point3& p = op.point;
+      OpStatus s = impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
+      if (s == OpStatus::done) stamp = ctx.result_stamp;
+      return s;
+    }
+    case OpKind::remove:
+      return impl.remove(ctx, op.vertex, op.stamp, r.remove);
+    case OpKind::remove_insertion: {
+      const TicketSlot& slot = tickets[op.ticket];
+      if (slot.state.load(std::memory_order_acquire) == 2)
+        throw Error(ErrorCode::unknown_vertex,
+                    "cannot undo insertion " + std::to_string(op.ticket) + ": that insertion failed");
+      return impl.remove(ctx, slot.vertex, slot.stamp, r.remove);
+    }
+  }
+  return OpStatus::done;
+}
+
 void EngineState::execute(Worker& w, QueuedOp* opp) {
   QueuedOp& op = *opp;
   // Enter an operation unless the world is stopped (see run_global).
@@ -342,35 +391,18 @@ void EngineState::execute(Worker& w, QueuedOp* opp) {
   OpContext& ctx = *w.ctx;
   w.attempts.fetch_add(1, std::memory_order_relaxed);
   ++w.window_attempts;
+  if (op.kind == OpKind::remove_insertion && tickets[op.ticket].state.load(std::memory_order_acquire) == 0) {
+    // The insertion it undoes is not done yet: try again later.
+    w.in_op.store(false, std::memory_order_release);
+    w.deferred.fetch_add(1, std::memory_order_relaxed);
+    w.queue.push(opp);
+    return;
+  }
   OpResult r;
   OpStatus s = OpStatus::done;
   std::uint64_t stamp = 0;
   try {
-    switch (op.kind) {
-      case OpKind::insert: {
-        const Point3& p = op.point;
-        s = impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
-        if (s == OpStatus::done) stamp = ctx.result_stamp;
-        break;
-      }
-      case OpKind::remove:
-        s = impl.remove(ctx, op.vertex, op.stamp, r.remove);
-        break;
-      case OpKind::remove_insertion: {
-        TicketSlot& slot = tickets[op.ticket];
-        int st = slot.state.load(std::memory_order_acquire);
-        if (st == 0) {  // the insertion it undoes is not done yet
-          w.in_op.store(false, std::memory_order_release);
-          w.deferred.fetch_add(1, std::memory_order_relaxed);
-          w.queue.push(opp);
-          return;
-        }
-        if (st == 2) throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(op.ticket) +
-                                                                ": that insertion failed");
-        s = impl.remove(ctx, slot.vertex, slot.stamp, r.remove);
-        break;
-      }
-    }
+    s = run_op(ctx, op, r, stamp);
   } catch (...) {
     impl.release_all(ctx);
     r.error = std::current_exception();
@@ -407,16 +439,7 @@ void EngineState::run_global(Worker& w, QueuedOp* opp) {
   OpResult r;
   std::uint64_t stamp = 0;
   try {
-    if (op.kind == OpKind::insert) {
-      const Point3& p = op.point;
-      impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
-      stamp = ctx.result_stamp;
-    } else {
-      VertexId v = op.vertex;
-      std::uint64_t expect = op.stamp;
-      if (op.kind == OpKind::remove_insertion) v = tickets[op.ticket].vertex, expect = tickets[op.ticket].stamp;
-      impl.remove(ctx, v, expect, r.remove);
-    }
+    run_op(ctx, op, r, stamp);  // single-threaded: always done
   } catch (...) {
     r.error = std::current_exception();
   }
@@ -569,19 +592,15 @@ RemoveAwaitable Engine::remove(VertexId v) {
 bool InsertAwaitable::await_suspend(std::coroutine_handle<> h) {
   waiter = h;
   EngineState& e = *engine->state_;
+  QueuedOp* op;
   try {
-    e.check_point(point_);
+    op = e.make_insert(point_);
   } catch (...) {
     result.error = std::current_exception();
-    return false;
+    return false;  // await_resume throws it
   }
-  QueuedOp& op = *e.acquire_op();
-  op.kind = OpKind::insert;
-  op.point = point_;
-  op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
-  e.tickets[op.ticket].point = point_;
-  op.awaiter = this;
-  e.submit(&op);  // from here on `this` may already be resumed and gone
+  op->awaiter = this;
+  e.submit(op);  // from here on `this` may already be resumed and gone
   return true;
 }
 
@@ -593,20 +612,15 @@ InsertResult InsertAwaitable::await_resume() {
 bool RemoveAwaitable::await_suspend(std::coroutine_handle<> h) {
   waiter = h;
   EngineState& e = *engine->state_;
-  const auto& m = e.impl;
-  if (vertex_ == 0 || vertex_ >= m.verts.size() || m.verts[vertex_].multiplicity == 0) {
-    result.error = std::make_exception_ptr(Error(
-        ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(vertex_) + ": it is not in the triangulation"));
+  QueuedOp* op;
+  try {
+    op = e.make_remove(vertex_);
+  } catch (...) {
+    result.error = std::current_exception();
     return false;
   }
-  QueuedOp& op = *e.acquire_op();
-  op.kind = OpKind::remove;
-  op.vertex = vertex_;
-  op.stamp = m.verts[vertex_].stamp;
-  const auto& p = m.verts[vertex_].p;
-  op.point = {p.x(), p.y(), p.z()};
-  op.awaiter = this;
-  e.submit(&op);
+  op->awaiter = this;
+  e.submit(op);
   return true;
 }
 
@@ -616,32 +630,17 @@ RemoveResult RemoveAwaitable::await_resume() {
 }
 
 Engine::Ticket Engine::insert(const Point3& p, Callback done) {
-  EngineState& e = *state_;
-  e.check_point(p);
-  QueuedOp& op = *e.acquire_op();
-  op.kind = OpKind::insert;
-  op.point = p;
-  op.ticket = e.tickets.grow_by(1) - e.tickets.begin();
-  e.tickets[op.ticket].point = p;
-  op.done = std::move(done);
-  Ticket t = op.ticket;
-  e.submit(&op);
+  QueuedOp* op = state_->make_insert(p);
+  op->done = std::move(done);
+  Ticket t = op->ticket;
+  state_->submit(op);
   return t;
 }
 
 void Engine::remove(VertexId v, Callback done) {
-  EngineState& e = *state_;
-  const auto& m = e.impl;
-  if (v == 0 || v >= m.verts.size() || m.verts[v].multiplicity == 0)
-    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
-  QueuedOp& op = *e.acquire_op();
-  op.kind = OpKind::remove;
-  op.vertex = v;
-  op.stamp = m.verts[v].stamp;
-  const auto& p = m.verts[v].p;
-  op.point = {p.x(), p.y(), p.z()};
-  op.done = std::move(done);
-  e.submit(&op);
+  QueuedOp* op = state_->make_remove(v);
+  op->done = std::move(done);
+  state_->submit(op);
 }
 
 void Engine::remove_insertion(Ticket t, Callback done) {

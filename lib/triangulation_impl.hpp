@@ -173,7 +173,6 @@ struct OpContext {
   std::vector<CellId> small_to_new;
   std::vector<CellId> star;
   std::unique_ptr<Triangulation::Impl> small;  // a removal's link triangulation
-  std::unique_ptr<OpContext> small_context;
 
   std::uint64_t next_stamp() { return (std::uint64_t{id} << 48) | (stamp_counter += 2); }
   std::uint64_t next_random() {

@@ -269,13 +269,6 @@ ReplayStats replay_engine(const pdt::OpStream& s, unsigned threads, pdt::Triangu
     if (!r.insert.inserted && r.insert.vertex != pdt::no_vertex) duplicates.fetch_add(1, std::memory_order_relaxed);
     if (r.remove == pdt::RemoveResult::multiplicity_lowered) lowered.fetch_add(1, std::memory_order_relaxed);
   };
-  auto on_insert = [&](const pdt::OpResult& r) { on_done(r); };
-  auto on_remove = [&](const pdt::OpResult& r) {
-    pdt::OpResult copy;
-    copy.error = r.error;
-    copy.remove = r.remove;
-    on_done(copy);
-  };
   pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
   opts.threads = threads;
   // Workers are coroutines, not threads: N workers run in an arena no wider
@@ -298,10 +291,10 @@ ReplayStats replay_engine(const pdt::OpStream& s, unsigned threads, pdt::Triangu
       if (phased && current && op.kind != *current) close_phase();
       current = op.kind;
       if (op.kind == Kind::insert) {
-        engine.insert(op.point, on_insert);
+        engine.insert(op.point, on_done);
         ++st.insertions;
       } else {
-        engine.remove_insertion(op.target, on_remove);
+        engine.remove_insertion(op.target, on_done);
         ++st.removals;
       }
       if ((i & 1023) == 0) bar.update(i + 1);

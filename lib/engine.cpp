@@ -15,7 +15,15 @@
 // Operations that change the dimension (the first points, a removal that
 // leaves a coplanar set) cannot run under vertex locks: they run with the
 // world stopped. The worker that needs it takes `global_mutex`, raises
-// `world_stop` and waits until no other worker is inside an operation.
+// `world_stop` and waits until no other worker is inside an operation. The
+// jump-and-walk grid is regrown the same way each time the vertex ids double,
+// so it always holds about two vertices per slot (walks stay short at every
+// size, and a small run does not pay for a domain-sized grid).
+//
+// Shared writes per operation are kept to the queue itself: counts of
+// submitted and finished operations live on each worker (drain() sums them),
+// and a worker folds its cell/vertex count deltas into the triangulation's
+// totals only when it goes idle or to sleep.
 #include "pdt/engine.hpp"
 
 #include <oneapi/tbb/concurrent_vector.h>
@@ -55,6 +63,11 @@ struct QueuedOp {
 struct TicketSlot {
   std::atomic<int> state{0};  // 0 pending, 1 inserted, 2 failed
   std::atomic<bool> undone{false};
+  // An undo that found the insertion not done yet waits here (not in a queue,
+  // where it would spin); the insertion's completion re-queues it. Dekker
+  // handshake with `state`: each side stores its own word, then reads the
+  // other's, all seq_cst, and `exchange` decides who re-queues.
+  std::atomic<QueuedOp*> parked{nullptr};
   VertexId vertex = no_vertex;  // written before state becomes 1
   std::uint64_t stamp = 0;
   Point3 point;
@@ -91,6 +104,12 @@ struct alignas(64) Worker {
   // Statistics: written by the worker, read by stats() (relaxed).
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0};
   std::atomic<double> seconds_asleep{0};
+  // Operations routed here, counted by submitters before the push (its own
+  // cache line: submitters write it, the worker never does), and operations
+  // finished, counted by the worker after their results are delivered.
+  // finished <= submitted; drain() waits until they are equal for every worker.
+  std::atomic<std::uint64_t> finished{0};
+  alignas(64) std::atomic<std::uint64_t> submitted{0};
 };
 
 struct EngineState {
@@ -106,7 +125,6 @@ struct EngineState {
   unsigned nthreads = 1, blocks = 1;
   std::vector<std::unique_ptr<Worker>> workers;
   std::vector<WorkerCoroutine> bodies;
-  std::atomic<std::int64_t> pending{0};
   tbb::concurrent_vector<TicketSlot> tickets;
   std::mutex sleep_mutex;
   std::vector<Worker*> sleepers;
@@ -114,6 +132,8 @@ struct EngineState {
   std::mutex global_mutex;
   std::atomic<bool> world_stop{false};
   std::atomic<std::uint64_t> global_ops{0};
+  // Vertex-id bound at which the jump grid is regrown (see the top comment).
+  std::atomic<std::size_t> grid_grow_at{0};
   // Operation records: recycled through a lock-free free list, allocated in
   // slabs, so submitting allocates nothing once warm.
   boost::lockfree::stack<QueuedOp*> free_ops{1024};
@@ -122,12 +142,23 @@ struct EngineState {
   QueuedOp* acquire_op();
   void release_op(QueuedOp* op);
 
-  template <class F>
-  void spawn(F&& f) {
-    arena->execute([&] { tasks.run(std::forward<F>(f)); });
+  // Runs h (a worker body or a coroutine awaiting a result) as a task of
+  // `tasks`, marked as this engine's so drain() can refuse to wait for itself.
+  void spawn(std::coroutine_handle<> h) {
+    arena->execute([&] {
+      tasks.run([this, h] {
+        const EngineState* outer = running_engine;
+        running_engine = this;
+        h.resume();
+        running_engine = outer;
+      });
+    });
   }
+  // The engine whose task the current thread is running, if any.
+  static thread_local const EngineState* running_engine;
   Worker& owner_of(const Point3& p);
   void submit(QueuedOp* op);
+  void enqueue(Worker& w, QueuedOp* op);  // push and make sure w will run (op already counted)
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
   bool wake_one();
   void wake_locked(Worker& w);  // takes w off `sleepers` (caller holds sleep_mutex)
@@ -140,7 +171,14 @@ struct EngineState {
   void run_global(Worker& w, QueuedOp* op);
   void complete(Worker& w, QueuedOp* op, OpResult& r, std::uint64_t stamp);
   void judge(Worker& w, bool* want_sleep);
-  void ensure_grid();
+  // World stop: true when w now runs alone (no other worker inside an
+  // operation); false when another worker holds the world. w must not be
+  // inside an operation itself.
+  bool try_stop_world(Worker& w, std::unique_lock<std::mutex>& lock);
+  void restart_world(std::unique_lock<std::mutex>& lock);
+  void ensure_grid();  // with the world stopped (or before workers run)
+  void maybe_grow_grid(Worker& w);
+  bool idle_everywhere() const;  // no operation pending on any worker
   WorkerCoroutine body(Worker& w);
   void check_point(const Point3& p) const;
 };
@@ -155,16 +193,17 @@ struct IdleAwait {
     // from then on touch only locals (not this awaiter, which lives in the frame).
     EngineState* es = e;
     Worker* wk = w;
+    es->impl.fold_counters(*wk->ctx);
     wk->handle = h;
     wk->phase.store(idle, std::memory_order_seq_cst);
     es->active.fetch_sub(1, std::memory_order_seq_cst);
     es->wake_one();  // an idle worker competes with nobody: let a sleeper run
     if (!wk->queue.empty()) {
       int expect = idle;
-      if (wk->phase.compare_exchange_strong(expect, running)) {
-        es->active.fetch_add(1);
-        return false;  // work arrived meanwhile: go on
-      }
+      // Work arrived meanwhile and no submitter resumed us: resume as a new
+      // task (not by returning false: a submitter may have resumed and
+      // re-suspended this coroutine already, so only the handle is ours).
+      if (wk->phase.compare_exchange_strong(expect, running)) es->resume(*wk);
     }
     return true;
   }
@@ -178,6 +217,7 @@ struct SleepAwait {
   bool await_suspend(std::coroutine_handle<> h) {
     EngineState* es = e;
     Worker* wk = w;
+    es->impl.fold_counters(*wk->ctx);
     std::lock_guard lock(es->sleep_mutex);
     if (es->active.load() <= 1) return false;  // the last running worker never sleeps
     wk->handle = h;
@@ -196,6 +236,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
     QueuedOp* op = nullptr;
     while (w.queue.pop(op)) {
       execute(w, op);
+      maybe_grow_grid(w);
       bool want_sleep = false;
       judge(w, &want_sleep);
       if (want_sleep) co_await SleepAwait{this, &w};
@@ -225,10 +266,49 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, tbb::t
 }
 
 void EngineState::ensure_grid() {
-  if (impl.dim.load() < 3 || impl.grid.slot_count >= opts.grid_slots / 2) return;
-  const double box[6] = {domain.lo.x, domain.lo.y, domain.lo.z, domain.hi.x, domain.hi.y, domain.hi.z};
-  impl.grid_rebuild(box, opts.grid_slots);
-  impl.grid.built_for = std::size_t{1} << 60;  // sized for the domain: no automatic rebuild
+  if (impl.dim.load() < 3) return;  // no grid below dimension 3
+  const std::size_t ids = impl.verts.size();
+  if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) return;
+  // Over the live vertices' bounding box, about two vertices per slot.
+  impl.grid_rebuild(nullptr, std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)));
+  impl.grid.built_for = std::size_t{1} << 60;  // the kernel never rebuilds it while the engine runs
+  grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
+}
+
+void EngineState::maybe_grow_grid(Worker& w) {
+  // Below dimension 3 there is no grid; the global step that builds the
+  // tetrahedra sizes it (run_global calls ensure_grid).
+  if (impl.verts.size() < grid_grow_at.load(std::memory_order_relaxed) || impl.dim.load(std::memory_order_relaxed) < 3)
+    return;
+  std::unique_lock<std::mutex> lock;
+  if (!try_stop_world(w, lock)) return;  // another worker is in a global step; it checks too
+  ensure_grid();
+  restart_world(lock);
+}
+
+bool EngineState::try_stop_world(Worker& w, std::unique_lock<std::mutex>& lock) {
+  lock = std::unique_lock(global_mutex, std::try_to_lock);
+  if (!lock.owns_lock()) return false;
+  world_stop.store(true, std::memory_order_seq_cst);
+  for (auto& other : workers)
+    if (other.get() != &w)
+      while (other->in_op.load(std::memory_order_seq_cst)) std::this_thread::yield();
+  return true;
+}
+
+void EngineState::restart_world(std::unique_lock<std::mutex>& lock) {
+  world_stop.store(false, std::memory_order_seq_cst);
+  lock.unlock();
+}
+
+bool EngineState::idle_everywhere() const {
+  // finished is read before submitted: equal values mean that at the moment
+  // finished was read, everything submitted to the worker was done.
+  for (const auto& w : workers) {
+    const std::uint64_t f = w->finished.load(std::memory_order_acquire);
+    if (f != w->submitted.load(std::memory_order_acquire)) return false;
+  }
+  return true;
 }
 
 Worker& EngineState::owner_of(const Point3& p) {
@@ -267,8 +347,7 @@ void EngineState::check_point(const Point3& p) const {
 
 void EngineState::resume(Worker& w) {
   active.fetch_add(1);
-  std::coroutine_handle<> h = w.handle;
-  spawn([h] { h.resume(); });
+  spawn(w.handle);
 }
 
 QueuedOp* EngineState::make_insert(const Point3& p) {
@@ -282,15 +361,25 @@ QueuedOp* EngineState::make_insert(const Point3& p) {
 }
 
 QueuedOp* EngineState::make_remove(VertexId v) {
-  // The vertex must be live: its caller got it from a completed insertion.
-  if (v == 0 || v >= impl.verts.size() || impl.verts[v].multiplicity == 0)
+  if (v == 0 || v >= impl.verts.size())
+    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
+  // The caller got v from a completed insertion it has not undone yet, so v
+  // stays live, and its point and stamp fixed, until this removal runs: they
+  // are read without a lock (the submitter is no worker and must not wait on
+  // one). Read as a sequence lock, so a misused id (dead, or recycled right
+  // now) gives stamp 0 or a changed stamp and a clean error, here or when the
+  // removal runs and checks the incarnation under the vertex's lock.
+  detail::VertexRec& rec = impl.verts[v];
+  const std::uint64_t stamp = rec.stamp.load(std::memory_order_acquire);
+  const Point3 where{rec.p.x(), rec.p.y(), rec.p.z()};
+  std::atomic_thread_fence(std::memory_order_acquire);
+  if (stamp == 0 || rec.stamp.load(std::memory_order_relaxed) != stamp)
     throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
   QueuedOp* op = acquire_op();
   op->kind = OpKind::remove;
   op->vertex = v;
-  op->stamp = impl.verts[v].stamp;
-  const auto& p = impl.verts[v].p;
-  op->point = {p.x(), p.y(), p.z()};
+  op->stamp = stamp;  // the incarnation seen now: a later reuse of the id is not removed
+  op->point = where;
   return op;
 }
 
@@ -312,8 +401,12 @@ void EngineState::release_op(QueuedOp* op) {
 }
 
 void EngineState::submit(QueuedOp* op) {
-  pending.fetch_add(1, std::memory_order_relaxed);
   Worker& w = owner_of(op->point);
+  w.submitted.fetch_add(1, std::memory_order_relaxed);
+  enqueue(w, op);
+}
+
+void EngineState::enqueue(Worker& w, QueuedOp* op) {
   w.queue.push(op);
   int expect = idle;
   if (w.phase.compare_exchange_strong(expect, running)) {
@@ -392,10 +485,15 @@ void EngineState::execute(Worker& w, QueuedOp* opp) {
   w.attempts.fetch_add(1, std::memory_order_relaxed);
   ++w.window_attempts;
   if (op.kind == OpKind::remove_insertion && tickets[op.ticket].state.load(std::memory_order_acquire) == 0) {
-    // The insertion it undoes is not done yet: try again later.
+    // The insertion it undoes is not done yet: park it on the ticket.
     w.in_op.store(false, std::memory_order_release);
     w.deferred.fetch_add(1, std::memory_order_relaxed);
-    w.queue.push(opp);
+    TicketSlot& slot = tickets[op.ticket];
+    slot.parked.store(opp, std::memory_order_seq_cst);
+    if (slot.state.load(std::memory_order_seq_cst) != 0) {
+      // Done meanwhile: take it back, unless the completion already did.
+      if (QueuedOp* back = slot.parked.exchange(nullptr, std::memory_order_seq_cst)) w.queue.push(back);
+    }
     return;
   }
   OpResult r;
@@ -424,16 +522,12 @@ void EngineState::execute(Worker& w, QueuedOp* opp) {
 
 void EngineState::run_global(Worker& w, QueuedOp* opp) {
   QueuedOp& op = *opp;
-  std::unique_lock lock(global_mutex, std::try_to_lock);
-  if (!lock.owns_lock()) {  // another worker is stopping the world: retry later
+  std::unique_lock<std::mutex> lock;
+  if (!try_stop_world(w, lock)) {  // another worker is stopping the world: retry later
     w.rollbacks.fetch_add(1, std::memory_order_relaxed);
     w.queue.push(opp);
     return;
   }
-  world_stop.store(true, std::memory_order_seq_cst);
-  for (auto& other : workers)
-    if (other.get() != &w)
-      while (other->in_op.load(std::memory_order_seq_cst)) std::this_thread::yield();
   // Nobody else is inside an operation: run it single-threaded.
   OpContext& ctx = *impl.seq;
   OpResult r;
@@ -445,8 +539,7 @@ void EngineState::run_global(Worker& w, QueuedOp* opp) {
   }
   ensure_grid();
   global_ops.fetch_add(1, std::memory_order_relaxed);
-  world_stop.store(false, std::memory_order_seq_cst);
-  lock.unlock();
+  restart_world(lock);
   ++w.window_completed;
   complete(w, opp, r, stamp);
 }
@@ -456,12 +549,13 @@ void EngineState::complete(Worker& w, QueuedOp* opp, OpResult& r, std::uint64_t 
   if (op.kind == OpKind::insert) {
     TicketSlot& slot = tickets[op.ticket];
     if (r.error) {
-      slot.state.store(2, std::memory_order_release);
+      slot.state.store(2, std::memory_order_seq_cst);
     } else {
       slot.vertex = r.insert.vertex;
       slot.stamp = stamp;
-      slot.state.store(1, std::memory_order_release);
+      slot.state.store(1, std::memory_order_seq_cst);
     }
+    if (QueuedOp* undo = slot.parked.exchange(nullptr, std::memory_order_seq_cst)) enqueue(owner_of(undo->point), undo);
   }
   w.completed.fetch_add(1, std::memory_order_relaxed);
   if (op.done) op.done(r);
@@ -469,11 +563,13 @@ void EngineState::complete(Worker& w, QueuedOp* opp, OpResult& r, std::uint64_t 
     OpAwaitBase* a = op.awaiter;
     a->result = std::move(r);
     std::coroutine_handle<> h = a->waiter;  // `a` may be gone once h resumes
-    spawn([h] { h.resume(); });
+    spawn(h);
   }
   release_op(opp);
-  pending.fetch_sub(1, std::memory_order_acq_rel);
+  w.finished.store(w.finished.load(std::memory_order_relaxed) + 1, std::memory_order_release);
 }
+
+thread_local const EngineState* EngineState::running_engine = nullptr;
 
 }  // namespace detail
 
@@ -659,9 +755,14 @@ void Engine::remove_insertion(Ticket t, Callback done) {
 
 void Engine::drain() {
   EngineState& e = *state_;
-  while (e.pending.load(std::memory_order_acquire) > 0) {
+  if (EngineState::running_engine == &e)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::drain() was called from one of this engine's callbacks or from a coroutine resumed by "
+                "it; it would wait for itself. Call drain() from a thread outside the engine's work (or co_await "
+                "each operation instead)");
+  while (!e.idle_everywhere()) {
     e.arena->execute([&] { e.tasks.wait(); });
-    if (e.pending.load(std::memory_order_acquire) > 0) {
+    if (!e.idle_everywhere()) {
       // Every task ended with work left: it sits with sleepers. Wake them.
       if (!e.wake_one()) std::this_thread::yield();
     }

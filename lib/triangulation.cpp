@@ -229,7 +229,7 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   r.p = p;
   r.cell = no_cell;
   r.multiplicity = 1;
-  r.stamp = (std::uint64_t{ctx.id} << 40) | ++ctx.vertex_counter;
+  r.stamp.store((std::uint64_t{ctx.id} << 40) | ++ctx.vertex_counter, std::memory_order_release);
   ++ctx.d_vertices;
   ctx.last_vertex = v;
   return v;
@@ -238,7 +238,7 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
 void Triangulation::Impl::free_vertex(OpContext& ctx, VertexId v) {
   VertexRec& r = verts[v];
   r.multiplicity = 0;
-  r.stamp = 0;
+  r.stamp.store(0, std::memory_order_relaxed);
   r.cell = ctx.free_vertices.head;
   if (ctx.free_vertices.count++ == 0) ctx.free_vertices.tail = v;
   ctx.free_vertices.head = v;
@@ -268,6 +268,14 @@ void Triangulation::Impl::merge_pools(OpContext& into, OpContext& from) {
   splice(into.free_cells, from.free_cells, [&](std::uint32_t c) -> std::uint32_t& { return cells[c].n[0]; });
   splice(into.free_vertices, from.free_vertices, [&](std::uint32_t v) -> std::uint32_t& { return verts[v].cell; });
   fold_counters(from);
+}
+
+void Triangulation::Impl::end_op_counters(OpContext& ctx) {
+  // An engine worker folds its deltas only when it goes idle or to sleep (see
+  // engine.cpp) or when they grow large: three shared counters updated after
+  // every operation would be one cache line bouncing between all workers.
+  constexpr std::int64_t kFoldAt = 4096;
+  if (!ctx.locking || ctx.d_cells >= kFoldAt || ctx.d_cells <= -kFoldAt) fold_counters(ctx);
 }
 
 void Triangulation::Impl::fold_counters(OpContext& ctx) {
@@ -372,7 +380,11 @@ VertexId Triangulation::Impl::start_vertex(OpContext& ctx, const KPoint& p, Vert
     if (!usable(v)) continue;
     if (best == no_vertex || CGAL::compare_distance_to_point(p, pt(v), pt(best)) == CGAL::SMALLER) best = v;
   }
-  if (best == no_vertex && usable(recent_vertex.load(std::memory_order_relaxed))) best = recent_vertex.load();
+  if (best == no_vertex) {
+    // One load: the vertex checked (and locked) must be the one returned.
+    const VertexId recent = recent_vertex.load(std::memory_order_relaxed);
+    if (usable(recent)) best = recent;
+  }
   if (best != no_vertex || ctx.locking) return best;  // the engine retries after a rollback
   for (VertexId v = 1; v < bound; ++v)
     if (verts[v].multiplicity > 0) return v;
@@ -451,7 +463,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   if (dim.load(std::memory_order_acquire) < 3) {
     if (ctx.locking) return OpStatus::needs_global;
     out = insert_flat(ctx, p);
-    ctx.result_stamp = verts[out.vertex].stamp;
+    ctx.result_stamp = verts[out.vertex].stamp.load(std::memory_order_relaxed);
     ++ctx.stats.insertions;
     fold_counters(ctx);
     return OpStatus::done;
@@ -481,7 +493,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
       if (w != 0 && pt(w) == p) {
         if (!lock_exclusive(ctx, w)) return rollback();
         ++verts[w].multiplicity;
-        ctx.result_stamp = verts[w].stamp;
+        ctx.result_stamp = verts[w].stamp.load(std::memory_order_relaxed);
         ++ctx.stats.duplicates;
         ++ctx.stats.insertions;
         release_all(ctx);
@@ -493,14 +505,14 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   if (!lock_cell_exclusive(ctx, c)) return rollback();
   if (find_cavity(ctx, p, c) != OpStatus::done) return rollback();
   VertexId v = alloc_vertex(ctx, p);
-  ctx.result_stamp = verts[v].stamp;
+  ctx.result_stamp = verts[v].stamp.load(std::memory_order_relaxed);
   fill_cavity(ctx, v);
   grid_update(ctx, v);
   // A start for contexts that know no vertex yet; refreshed rarely (shared line).
   if ((ctx.vertex_counter & 63) == 1) recent_vertex.store(v, std::memory_order_relaxed);
   ++ctx.stats.insertions;
   release_all(ctx);
-  fold_counters(ctx);
+  end_op_counters(ctx);
   out = {v, true};
   return OpStatus::done;
 }
@@ -776,7 +788,7 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
     throw Error(ErrorCode::unknown_vertex, os.str());
   }
   if (!lock_exclusive(ctx, v)) return OpStatus::rollback;
-  if (verts[v].multiplicity == 0 || (expected_stamp && verts[v].stamp != expected_stamp)) {
+  if (verts[v].multiplicity == 0 || (expected_stamp && verts[v].stamp.load(std::memory_order_relaxed) != expected_stamp)) {
     release_all(ctx);
     std::ostringstream os;
     os << "cannot remove vertex " << v << ": it is not in the triangulation (already removed, or never inserted)";
@@ -804,7 +816,7 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
   }
   ++ctx.stats.removals;
   release_all(ctx);
-  fold_counters(ctx);
+  end_op_counters(ctx);
   out = RemoveResult::removed;
   return OpStatus::done;
 }

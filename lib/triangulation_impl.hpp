@@ -67,7 +67,10 @@ struct VertexRec {
   CellId cell = no_cell;
   std::uint32_t multiplicity = 0;
   std::atomic<std::int32_t> lock{0};
-  std::uint64_t stamp = 0;  // unique per vertex incarnation (context << 40 | counter); 0 when free
+  // Unique per vertex incarnation (context << 40 | counter); 0 when free.
+  // Atomic so that a thread submitting a removal can read it without a lock:
+  // it is stored (release) after p on allocation, cleared on release.
+  std::atomic<std::uint64_t> stamp{0};
 };
 
 // Facet i of a cell, its vertices ordered so that every facet is seen with the
@@ -145,7 +148,7 @@ struct OpContext {
   std::uint32_t fresh_cell = 0, fresh_cell_end = 0;      // unused ids of the current cell chunk
   std::uint32_t fresh_vertex = 0, fresh_vertex_end = 0;  // same for vertices
 
-  // -- counters (net changes, folded into the Impl's totals after each op) ----
+  // -- counters (net changes, folded into the Impl's totals: end_op_counters) -
   std::int64_t d_vertices = 0, d_cells = 0, d_finite_cells = 0;
   TriangulationStats stats;
   std::uint64_t stamp_counter = 0, vertex_counter = 0;
@@ -198,7 +201,8 @@ struct Triangulation::Impl {
   detail::StableArray<VertexRec> verts;
 
   std::atomic<int> dim{-1};
-  // Totals; exact whenever no operation is running.
+  // Totals; exact whenever no operation is running and every engine worker
+  // has folded its deltas (it does before going idle or to sleep).
   std::atomic<std::int64_t> n_vertices{0}, n_cells{0}, n_finite_cells{0};
 
   // dimension < 3
@@ -238,6 +242,7 @@ struct Triangulation::Impl {
   // Gives a context's pooled ids back to another context (engine shutdown).
   void merge_pools(OpContext& into, OpContext& from);
   void fold_counters(OpContext& ctx);
+  void end_op_counters(OpContext& ctx);  // folds now, or later for an engine worker
 
   // -- locks (no-ops when !ctx.locking) ----------------------------------------
   bool lock_shared(OpContext& ctx, VertexId v);

@@ -1098,6 +1098,53 @@ TEST_CASE("engine: duplicates, remove_insertion and immediate errors of the call
   require_same_as_cgal(t, expected);
 }
 
+TEST_CASE("engine: drain() from the engine's own callback is refused, not a deadlock", "[engine]") {
+  pdt::Triangulation t;
+  insert_all(t, random_points(300, 93));
+  std::optional<pdt::ErrorCode> from_callback;
+  std::string message;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(2));
+    // The callback runs inside the engine's task; only record there (Catch2's
+    // assertions are not thread-safe), check after drain.
+    e.insert({0.4, 0.4, 0.4}, [&](const pdt::OpResult&) { from_callback = error_of([&] { e.drain(); }, &message); });
+    e.drain();
+  });
+  REQUIRE(from_callback == pdt::ErrorCode::invalid_argument);
+  REQUIRE(message.find("drain()") != std::string::npos);
+  require_valid(t);
+}
+
+TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots", "[engine]") {
+  const std::vector<Point3> pts = random_points(scaled(20000, 8000), 94);
+  for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}}) {
+    pdt::Triangulation t;
+    pdt::EngineOptions o = options_with(2);
+    o.grid_slots = cap;
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
+      ErrorSink errors;
+      for (const auto& p : pts) e.insert(p, errors.callback());
+      e.drain();
+      errors.require_none();
+    });
+    const std::size_t slots = t.impl().grid.slot_count;
+    INFO("cap " << cap << ", slots " << slots << ", points " << pts.size());
+    // Regrown as ids double, at about two vertices per slot: between n/8 and n/2.
+    if (cap >= pts.size()) {
+      REQUIRE(slots >= pts.size() / 8);
+      REQUIRE(slots <= pts.size() / 2);
+    } else {
+      REQUIRE(slots <= cap);
+      REQUIRE(slots >= cap / 2);
+    }
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+  }
+}
+
 // =============================================================================
 // 5. Options
 // =============================================================================
@@ -1115,7 +1162,7 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     REQUIRE(o.blocks_per_axis == 0);
     REQUIRE(o.contention_low == 0.7);
     REQUIRE(o.contention_high == 0.9);
-    REQUIRE(o.grid_slots == (std::size_t{1} << 21));
+    REQUIRE(o.grid_slots == (std::size_t{1} << 23));
     const pdt::EngineOptions plain = pdt::EngineOptions::from_environment();
     REQUIRE(plain.threads == 0);
   }

@@ -44,7 +44,8 @@ struct EngineOptions {
   double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
   double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
   unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
-  std::size_t grid_slots = 1u << 21;  // PDT_GRID_SLOTS: jump-and-walk grid slots over the domain
+  std::size_t grid_slots = 1u << 23;  // PDT_GRID_SLOTS: most slots of the jump-and-walk grid, which
+                                      // grows with the vertex count (about 2 vertices per slot)
 
   // Starts from `defaults` and overrides each field whose variable is set.
   // Throws pdt::Error(invalid_argument) naming the variable for a bad value.
@@ -121,7 +122,7 @@ class Engine {
   // refused. arena: where workers run; null = the caller's current arena.
   Engine(Triangulation& t, const Box& domain, EngineOptions options = EngineOptions::from_environment(),
          tbb::task_arena* arena = nullptr);
-  ~Engine();  // drains
+  ~Engine();  // drains; so never destroy an engine from its own callbacks or coroutines
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;
 
@@ -137,7 +138,12 @@ class Engine {
   // ticket never issued or already undone.
   void remove_insertion(Ticket t, Callback done = {});
 
-  void drain();  // returns when every operation submitted before the call is done
+  // Returns when no operation is pending: every one submitted before the call
+  // is done (and those other threads submit meanwhile, so a producer that
+  // never pauses keeps it waiting). Throws pdt::Error(invalid_argument) when
+  // called from this engine's own callbacks or from a coroutine it resumed:
+  // there it would wait for itself.
+  void drain();
   EngineStats stats() const;
   unsigned threads() const;
   unsigned blocks_per_axis() const;

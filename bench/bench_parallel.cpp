@@ -15,6 +15,9 @@
 //           within the noise: one indirect call per operation, no allocation).
 //           Each phase is timed separately; its engine statistics are the
 //           difference of stats() before and after it.
+//  pdt batch the same engine on CGAL parallel's terms: insert_batch(all)
+//           (spatially sorted inside, timed), drain(); remove_insertions(the
+//           first F*N) (sorted the same way), drain().
 //  CGAL seq Delaunay_triangulation_3<Epick, Default, Fast_location>: insert(p)
 //           one at a time in the same order (no spatial sort), then remove(vh)
 //           of the first F*N one at a time (as bench_sequential).
@@ -401,10 +404,14 @@ struct Result {
   std::string first_error;  // pdt: the first failed operation's message
 };
 
-// pdt: insertions then removals of the first n_remove insertions.
-Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::size_t n_remove, unsigned threads) {
+// pdt: insertions then removals of the first n_remove insertions. One
+// operation at a time (insert(p, cb), then remove_insertion(ticket, cb)), or
+// in batch mode, on CGAL parallel's terms: insert_batch(all), then
+// remove_insertions(the first n_remove), both spatially sorted inside.
+Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::size_t n_remove, unsigned threads,
+               bool batch) {
   Result r;
-  r.impl = "pdt";
+  r.impl = batch ? "pdt_batch" : "pdt";
   r.threads = threads;
   settle();
   {
@@ -420,9 +427,14 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
 
       const pdt::EngineStats s0 = e.stats();
       Stopwatch sw;
-      for (std::size_t k = 0; k < pts.size(); ++k) {
-        pdt::Engine::Ticket tk = e.insert(pts[k], errors.callback());
-        if (k < n_remove) tickets[k] = tk;
+      if (batch) {
+        const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
+        for (std::size_t k = 0; k < n_remove; ++k) tickets[k] = first + k;
+      } else {
+        for (std::size_t k = 0; k < pts.size(); ++k) {
+          pdt::Engine::Ticket tk = e.insert(pts[k], errors.callback());
+          if (k < n_remove) tickets[k] = tk;
+        }
       }
       e.drain();
       const double t_ins = sw.seconds();
@@ -433,7 +445,10 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
       r.bytes_per_tet = t.number_of_cells() ? double(t.memory_bytes()) / double(t.number_of_cells()) : 0;
 
       sw.restart();
-      for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
+      if (batch)
+        e.remove_insertions(tickets, errors.callback());
+      else
+        for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
       e.drain();
       const double t_rem = sw.seconds();
       r.rem = phase_between(s1, e.stats(), t_rem, n_remove);
@@ -646,7 +661,7 @@ struct Csv {
   void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
            const char* phase_name, const Phase& p, double base1, double cgal, double par) {
     if (!on || !p.ran) return;
-    const bool is_pdt = r.impl == "pdt";
+    const bool is_pdt = r.impl == "pdt" || r.impl == "pdt_batch";
     char buf[1024];
     auto ratio = [&](double num, double den) -> std::string {
       if (num <= 0 || den <= 0) return "";
@@ -793,12 +808,17 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
     Guard g(name + ": CGAL sequential", config_timeout);
     return run_cgal_seq(pts, cgal_removes);
   }();
-  std::vector<Result> mine, par;
+  std::vector<Result> mine, batch, par;
   for (unsigned t : o.threads) {
     progress("[%s] pdt, %u thread(s)...\n", name.c_str(), t);
     {
       Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
-      mine.push_back(run_pdt(pts, box, n_remove, t));
+      mine.push_back(run_pdt(pts, box, n_remove, t, false));
+    }
+    progress("[%s] pdt batch, %u thread(s)...\n", name.c_str(), t);
+    {
+      Guard g(name + ": pdt batch with " + std::to_string(t) + " thread(s)", config_timeout);
+      batch.push_back(run_pdt(pts, box, n_remove, t, true));
     }
     if (o.cgal_parallel) {
       progress("[%s] CGAL parallel, %u thread(s)...\n", name.c_str(), t);
@@ -835,10 +855,19 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Speedup2 (CGAL seq / pdt)", [&](int ph, std::size_t i) {
     return fmt_ratio(ph_of(seq, ph).seconds, ph_of(mine[i], ph).seconds);
   });
+  row("pdt batch time (s)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(batch[i], ph).seconds); });
+  row("Batch speedup1 (batch 1 thread / batch)", [&](int ph, std::size_t i) {
+    return fmt_ratio(ph_of(batch[0], ph).seconds, ph_of(batch[i], ph).seconds);
+  });
+  row("Batch max #Rollbacks/#compl.ops (%)",
+      [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(batch[i], ph).max_rb_pct); });
   if (o.cgal_parallel) {
     row("CGAL parallel time (s)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(par[i], ph).seconds); });
     row("CGAL parallel / pdt", [&](int ph, std::size_t i) {
       return fmt_ratio(ph_of(par[i], ph).seconds, ph_of(mine[i], ph).seconds);
+    });
+    row("CGAL parallel / pdt batch", [&](int ph, std::size_t i) {
+      return fmt_ratio(ph_of(par[i], ph).seconds, ph_of(batch[i], ph).seconds);
     });
   }
   row("pdt bytes/tet (after insertions)",
@@ -851,6 +880,8 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
 
   int bad = 0;
   for (const auto& r : mine) bad += !check("pdt", r.threads, r.shape, seq.shape) + !check_errors("pdt", r);
+  for (const auto& r : batch)
+    bad += !check("pdt batch", r.threads, r.shape, seq.shape) + !check_errors("pdt batch", r);
   for (const auto& r : par) bad += !check("CGAL parallel", r.threads, r.shape, seq.shape);
   std::printf("  check: %s\n", bad ? "MISMATCH (see above)" : "every final triangulation has CGAL seq's cell and vertex counts");
   std::printf("  peak RSS so far: %.1f MiB\n", mib(double(pdt::detail::peak_rss_bytes())));
@@ -859,6 +890,8 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
     const double p0 = o.cgal_parallel ? par[i].ins.seconds : 0, p1 = o.cgal_parallel ? par[i].rem.seconds : 0;
     csv.row("main", name, pts.size(), mine[i], "insert", mine[i].ins, mine[0].ins.seconds, seq.ins.seconds, p0);
     csv.row("main", name, pts.size(), mine[i], "remove", mine[i].rem, mine[0].rem.seconds, seq.rem.seconds, p1);
+    csv.row("main", name, pts.size(), batch[i], "insert", batch[i].ins, batch[0].ins.seconds, seq.ins.seconds, p0);
+    csv.row("main", name, pts.size(), batch[i], "remove", batch[i].rem, batch[0].rem.seconds, seq.rem.seconds, p1);
   }
   csv.row("main", name, pts.size(), seq, "insert", seq.ins, 0, 0, 0);
   csv.row("main", name, pts.size(), seq, "remove", seq.rem, 0, 0, 0);
@@ -898,7 +931,7 @@ int extreme_table(const Options& o, Csv& csv) {
     for (int k = 0; k < extreme_repeats; ++k) {
       const double limit = config_timeout > 0 ? std::min(config_timeout, extreme_run_timeout) : 0;
       Guard g("extreme case: pdt with " + std::to_string(t) + " thread(s), run " + std::to_string(k + 1), limit);
-      runs.push_back(run_pdt(pts, box, pts.size(), t));
+      runs.push_back(run_pdt(pts, box, pts.size(), t, false));
     }
     Result agg = runs[0];
     auto median = [&](auto get) {

@@ -42,6 +42,7 @@
 #include <thread>
 
 #include "pdt/error.hpp"
+#include "spatial_order.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -56,6 +57,7 @@ struct QueuedOp {
   VertexId vertex = no_vertex;  // remove
   std::uint64_t stamp = 0;      // remove: the vertex incarnation expected (0 = any)
   std::uint64_t ticket = 0;     // insert: its own ticket; remove_insertion: the insertion undone
+  bool from_batch = false;      // insert: part of a spatially sorted batch (walk from the last vertex)
   Engine::Callback done;
   OpAwaitBase* awaiter = nullptr;
 };
@@ -69,6 +71,8 @@ struct TicketSlot {
   // other's, all seq_cst, and `exchange` decides who re-queues.
   std::atomic<QueuedOp*> parked{nullptr};
   VertexId vertex = no_vertex;  // written before state becomes 1
+  bool inserted = false;        // same
+  std::exception_ptr error;     // written before state becomes 2
   std::uint64_t stamp = 0;
   Point3 point;
 };
@@ -158,6 +162,8 @@ struct EngineState {
   static thread_local const EngineState* running_engine;
   Worker& owner_of(const Point3& p);
   void submit(QueuedOp* op);
+  void claim_undo(std::uint64_t t);  // marks insertion t undone; throws if it cannot be
+  void submit_undo(std::uint64_t t, const Engine::Callback& done);
   void enqueue(Worker& w, QueuedOp* op);  // push and make sure w will run (op already counted)
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
   bool wake_one();
@@ -397,6 +403,7 @@ QueuedOp* EngineState::acquire_op() {
 void EngineState::release_op(QueuedOp* op) {
   op->done = nullptr;
   op->awaiter = nullptr;
+  op->from_batch = false;
   free_ops.push(op);
 }
 
@@ -455,7 +462,8 @@ OpStatus EngineState::run_op(OpContext& ctx, QueuedOp& op, OpResult& r, std::uin
   switch (op.kind) {
     case OpKind::insert: {
       const Point3& p = op.point;
-      OpStatus s = impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), no_vertex, r.insert);
+      const VertexId hint = op.from_batch ? ctx.last_vertex : no_vertex;
+      OpStatus s = impl.insert(ctx, KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0), hint, r.insert);
       if (s == OpStatus::done) stamp = ctx.result_stamp;
       return s;
     }
@@ -546,12 +554,15 @@ void EngineState::run_global(Worker& w, QueuedOp* opp) {
 
 void EngineState::complete(Worker& w, QueuedOp* opp, OpResult& r, std::uint64_t stamp) {
   QueuedOp& op = *opp;
+  if (op.kind != OpKind::remove) r.ticket = op.ticket;
   if (op.kind == OpKind::insert) {
     TicketSlot& slot = tickets[op.ticket];
     if (r.error) {
+      slot.error = r.error;
       slot.state.store(2, std::memory_order_seq_cst);
     } else {
       slot.vertex = r.insert.vertex;
+      slot.inserted = r.insert.inserted;
       slot.stamp = stamp;
       slot.state.store(1, std::memory_order_seq_cst);
     }
@@ -637,8 +648,10 @@ WorkerStats EngineStats::total() const {
 // ---------------------------------------------------------------------------
 Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::task_arena* arena) {
   auto bad = [](const std::string& what) { throw Error(ErrorCode::invalid_argument, what); };
+  const double corners[6] = {domain.lo.x, domain.lo.y, domain.lo.z, domain.hi.x, domain.hi.y, domain.hi.z};
+  // Each coordinate on its own: a sum would overflow for a box near +-DBL_MAX.
   if (!(domain.lo.x <= domain.hi.x && domain.lo.y <= domain.hi.y && domain.lo.z <= domain.hi.z) ||
-      !std::isfinite(domain.lo.x + domain.lo.y + domain.lo.z + domain.hi.x + domain.hi.y + domain.hi.z))
+      !std::all_of(std::begin(corners), std::end(corners), [](double c) { return std::isfinite(c); }))
     bad("the engine's domain box must be finite with lo <= hi on every axis");
   if (!(options.contention_low >= 0 && options.contention_low <= options.contention_high &&
         options.contention_high <= 1))
@@ -739,18 +752,81 @@ void Engine::remove(VertexId v, Callback done) {
   state_->submit(op);
 }
 
-void Engine::remove_insertion(Ticket t, Callback done) {
+Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback done) {
   EngineState& e = *state_;
+  for (const Point3& p : points) e.check_point(p);
+  if (points.size() >= no_vertex)
+    throw Error(ErrorCode::invalid_argument,
+                "insert_batch: " + std::to_string(points.size()) + " points; vertex ids allow at most 2^32 - 2");
+  std::vector<std::uint32_t> order;
+  e.arena->execute([&] { order = detail::spatial_order(points, true); });
+  const auto first = static_cast<Ticket>(e.tickets.grow_by(points.size()) - e.tickets.begin());
+  for (std::size_t i = 0; i < points.size(); ++i) e.tickets[first + i].point = points[i];
+  for (std::uint32_t i : order) {
+    QueuedOp* op = e.acquire_op();
+    op->kind = OpKind::insert;
+    op->point = points[i];
+    op->ticket = first + i;
+    op->from_batch = true;
+    op->done = done;
+    e.submit(op);
+  }
+  return first;
+}
+
+InsertResult Engine::insertion_result(Ticket t) const {
+  const EngineState& e = *state_;
   if (t >= e.tickets.size())
+    throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) + " was never submitted");
+  const detail::TicketSlot& slot = e.tickets[t];
+  switch (slot.state.load(std::memory_order_acquire)) {
+    case 1: return {slot.vertex, slot.inserted};
+    case 2: std::rethrow_exception(slot.error);
+    default:
+      throw Error(ErrorCode::invalid_argument,
+                  "insertion " + std::to_string(t) + " has not finished; drain() first, or wait for its callback");
+  }
+}
+
+void EngineState::claim_undo(std::uint64_t t) {
+  if (t >= tickets.size())
     throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": no such insertion was submitted");
-  if (e.tickets[t].undone.exchange(true))
+  if (tickets[t].undone.exchange(true))
     throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": it was already undone");
-  QueuedOp& op = *e.acquire_op();
+}
+
+void EngineState::submit_undo(std::uint64_t t, const Engine::Callback& done) {
+  QueuedOp& op = *acquire_op();
   op.kind = OpKind::remove_insertion;
   op.ticket = t;
-  op.point = e.tickets[t].point;
-  op.done = std::move(done);
-  e.submit(&op);
+  op.point = tickets[t].point;
+  op.done = done;
+  submit(&op);
+}
+
+void Engine::remove_insertion(Ticket t, Callback done) {
+  state_->claim_undo(t);
+  state_->submit_undo(t, done);
+}
+
+void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
+  EngineState& e = *state_;
+  if (batch.size() >= no_vertex)
+    throw Error(ErrorCode::invalid_argument, "remove_insertions: " + std::to_string(batch.size()) + " tickets; at most 2^32 - 2");
+  // All or nothing: claim every ticket, and give the claims back on the first bad one.
+  for (std::size_t i = 0; i < batch.size(); ++i) {
+    try {
+      e.claim_undo(batch[i]);
+    } catch (...) {
+      for (std::size_t j = 0; j < i; ++j) e.tickets[batch[j]].undone.store(false);
+      throw;
+    }
+  }
+  std::vector<Point3> where(batch.size());
+  for (std::size_t i = 0; i < batch.size(); ++i) where[i] = e.tickets[batch[i]].point;
+  std::vector<std::uint32_t> order;
+  e.arena->execute([&] { order = detail::spatial_order(where, true); });
+  for (std::uint32_t i : order) e.submit_undo(batch[i], done);
 }
 
 void Engine::drain() {

@@ -1089,34 +1089,38 @@ VertexId Triangulation::Impl::grid_lookup(const KPoint& p) const {
 }
 
 void Triangulation::Impl::grid_rebuild(const double* box, std::size_t slots) {
+  // Counts the live vertices itself: n_vertices lags while engine workers
+  // hold unfolded deltas (this runs with the world stopped then).
   double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
   const std::size_t bound = verts.size();
-  const std::size_t n = static_cast<std::size_t>(n_vertices.load());
-  if (box) {
+  std::size_t n = 0;
+  for (VertexId v = 1; v < bound; ++v) {
+    if (verts[v].multiplicity == 0) continue;
+    ++n;
+    if (box) continue;
+    const KPoint& p = pt(v);
+    const double c[3] = {p.x(), p.y(), p.z()};
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+  }
+  if (box)
     for (int a = 0; a < 3; ++a) lo[a] = box[a], hi[a] = box[3 + a];
-  } else {
-    for (VertexId v = 1; v < bound; ++v) {
-      if (verts[v].multiplicity == 0) continue;
-      const KPoint& p = pt(v);
-      const double c[3] = {p.x(), p.y(), p.z()};
-      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
-    }
-  }
   // About 2 vertices per slot right after a rebuild, so few slots are empty.
-  std::size_t want = slots ? slots : std::max<std::size_t>(1, n / 2);
-  int res = std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want))));
-  grid.res = res;
+  // Built aside and moved in: an allocation failure leaves the old grid.
+  const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);
+  detail::JumpGrid g;
+  g.res = std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want))));
   for (int a = 0; a < 3; ++a) {
-    grid.lo[a] = 0.5 * lo[a];  // see slot_of
+    g.lo[a] = 0.5 * lo[a];  // see slot_of
     double half_ext = 0.5 * hi[a] - 0.5 * lo[a];
-    grid.inv[a] = half_ext > 0 && std::isfinite(res / half_ext) ? res / half_ext : 0;
+    g.inv[a] = half_ext > 0 && std::isfinite(g.res / half_ext) ? g.res / half_ext : 0;
   }
-  grid.slot_count = static_cast<std::size_t>(res) * res * res;
-  grid.slots = std::make_unique<std::atomic<VertexId>[]>(grid.slot_count);
-  for (std::size_t s = 0; s < grid.slot_count; ++s) grid.set(s, no_vertex);
+  g.slot_count = static_cast<std::size_t>(g.res) * g.res * g.res;
+  g.slots = std::make_unique<std::atomic<VertexId>[]>(g.slot_count);
+  for (std::size_t s = 0; s < g.slot_count; ++s) g.set(s, no_vertex);
   for (VertexId v = 1; v < bound; ++v)
-    if (verts[v].multiplicity > 0) grid.set(grid.slot_of(pt(v)), v);
-  grid.built_for = n;
+    if (verts[v].multiplicity > 0) g.set(g.slot_of(pt(v)), v);
+  g.built_for = n;
+  grid = std::move(g);
 }
 
 }  // namespace pdt

@@ -1,8 +1,10 @@
 // pdt::Triangulation: argument checking and queries over Triangulation::Impl.
 #include <cmath>
 #include <sstream>
+#include <string>
 
 #include "pdt/error.hpp"
+#include "spatial_order.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -39,6 +41,22 @@ InsertResult Triangulation::insert(const Point3& p, Hint hint) {
       if (m.cells[hint.cell].v[i] != 0) start = m.cells[hint.cell].v[i];
   InsertResult out;
   m.insert(*m.seq, to_kpoint(p), start, out);  // single-threaded: always done
+  return out;
+}
+
+std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> points) {
+  for (const Point3& p : points) require_finite(p);
+  if (points.size() >= no_vertex)
+    throw Error(ErrorCode::invalid_argument,
+                "insert_batch: " + std::to_string(points.size()) + " points; vertex ids allow at most 2^32 - 2");
+  const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
+  std::vector<InsertResult> out(points.size());
+  Impl& m = *impl_;
+  VertexId previous = no_vertex;  // the walk starts at the last vertex: the order keeps it near
+  for (std::uint32_t i : order) {
+    m.insert(*m.seq, to_kpoint(points[i]), previous, out[i]);  // single-threaded: always done
+    previous = out[i].vertex;
+  }
   return out;
 }
 

@@ -1098,6 +1098,115 @@ TEST_CASE("engine: duplicates, remove_insertion and immediate errors of the call
   require_same_as_cgal(t, expected);
 }
 
+TEST_CASE("engine: insert_batch gives CGAL's triangulation; tickets follow the batch's order", "[engine][tsan]") {
+  const std::vector<Point3> pts = random_points(scaled(20000, 2000), 95);
+  std::vector<Point3> batch(pts.begin(), pts.begin() + static_cast<std::ptrdiff_t>(pts.size() / 2));
+  batch.insert(batch.end(), batch.begin(), batch.begin() + 100);  // duplicates within the batch
+  const std::vector<Point3> singles(pts.begin() + static_cast<std::ptrdiff_t>(pts.size() / 2), pts.end());
+  for (unsigned threads : {1u, 4u, 16u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    std::vector<pdt::InsertResult> results(batch.size());
+    std::vector<int> calls(batch.size(), 0);
+    std::optional<pdt::ErrorCode> refused;
+    bool ticket_error = false;
+    pdt::Engine::Ticket first = 0;
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(threads));
+      ErrorSink errors;
+      for (std::size_t i = 0; i < singles.size() / 2; ++i) e.insert(singles[i], errors.callback());
+      first = e.insert_batch(batch, [&](const pdt::OpResult& r) {
+        if (r.error || r.ticket < first || r.ticket >= first + batch.size()) {
+          ticket_error = true;
+          return;
+        }
+        ++calls[r.ticket - first];  // each ticket is called exactly once, on one thread
+      });
+      for (std::size_t i = singles.size() / 2; i < singles.size(); ++i) e.insert(singles[i], errors.callback());
+      // A batch with one point outside the domain is refused whole.
+      std::vector<Point3> bad = {{0.5, 0.5, 0.5}, {0.5, 1.5, 0.5}};
+      refused = error_of([&] { e.insert_batch(bad); });
+      e.drain();
+      errors.require_none();
+      for (std::size_t i = 0; i < batch.size(); ++i) results[i] = e.insertion_result(first + i);
+      REQUIRE(error_of([&] { e.insertion_result(first + batch.size() + singles.size()); }) ==
+              pdt::ErrorCode::invalid_argument);
+    });
+    REQUIRE(first == singles.size() / 2);
+    REQUIRE_FALSE(ticket_error);
+    REQUIRE(std::all_of(calls.begin(), calls.end(), [](int c) { return c == 1; }));
+    REQUIRE(refused == pdt::ErrorCode::outside_domain);
+    std::size_t fresh = 0;
+    for (std::size_t i = 0; i < batch.size(); ++i) {
+      REQUIRE(t.is_vertex(results[i].vertex));
+      REQUIRE(t.point(results[i].vertex) == batch[i]);
+      fresh += results[i].inserted;
+    }
+    REQUIRE(fresh == batch.size() - 100);
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+  }
+}
+
+TEST_CASE("engine: remove_insertions undoes a batch, all or nothing", "[engine][tsan]") {
+  const std::vector<Point3> pts = random_points(scaled(10000, 1500), 98);
+  for (unsigned threads : {1u, 8u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    std::optional<pdt::ErrorCode> repeated, unknown;
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(threads));
+      ErrorSink errors;
+      const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
+      // Undo the even insertions, submitted before the batch has finished.
+      std::vector<pdt::Engine::Ticket> evens;
+      for (std::size_t i = 0; i < pts.size(); i += 2) evens.push_back(first + i);
+      std::vector<pdt::Engine::Ticket> with_repeat = {first + 1, first + 3, first + 1};
+      repeated = error_of([&] { e.remove_insertions(with_repeat); });
+      std::vector<pdt::Engine::Ticket> with_unknown = {first + 1, first + pts.size() + 7};
+      unknown = error_of([&] { e.remove_insertions(with_unknown); });
+      e.remove_insertions(evens, errors.callback());
+      e.drain();
+      errors.require_none();
+      // The refused batches claimed nothing: their odd tickets can still be undone one by one.
+      e.remove_insertion(first + 1, errors.callback());
+      e.remove_insertion(first + 3, errors.callback());
+      e.drain();
+      errors.require_none();
+    });
+    REQUIRE(repeated == pdt::ErrorCode::unknown_vertex);
+    REQUIRE(unknown == pdt::ErrorCode::unknown_vertex);
+    std::vector<Point3> expected;
+    for (std::size_t i = 5; i < pts.size(); i += 2) expected.push_back(pts[i]);
+    require_valid(t);
+    require_same_as_cgal(t, expected);
+  }
+}
+
+TEST_CASE("engine: a domain reaching the largest doubles", "[engine][extreme]") {
+  // The domain check and the block routing must not overflow either.
+  const double m = std::numeric_limits<double>::max();
+  std::vector<Point3> pts;
+  for (int x : {-1, 1})
+    for (int y : {-1, 1})
+      for (int z : {-1, 1}) pts.push_back({x * m, y * m, z * m});
+  for (const auto& p : random_points(2000, 96, -1, 1)) pts.push_back({p.x * m, p.y * m, p.z * m});
+  for (const auto& p : random_points(500, 97, -1, 1)) pts.push_back({p.x * 1e-300, p.y, p.z * 1e300});
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{-m, -m, -m}, {m, m, m}}, options_with(4));
+    ErrorSink errors;
+    for (const auto& p : pts) e.insert(p, errors.callback());
+    e.drain();
+    errors.require_none();
+  });
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
 TEST_CASE("engine: drain() from the engine's own callback is refused, not a deadlock", "[engine]") {
   pdt::Triangulation t;
   insert_all(t, random_points(300, 93));

@@ -879,3 +879,52 @@ TEST_CASE("coplanar start: apex positions", "[insert][degenerate]") {
     require_same_as_cgal(t, pts);
   }
 }
+
+TEST_CASE("insert_batch equals CGAL and reports each point's vertex in the batch's order", "[insert]") {
+  std::vector<std::vector<Point3>> sets = {generated_points(pdt::Distribution::uniform, 5000, 11),
+                                           generated_points(pdt::Distribution::line, 3000, 12), lattice(7),
+                                           cospherical(325)};
+  // Duplicates inside one batch: the second copy raises the multiplicity.
+  std::vector<Point3> dups = generated_points(pdt::Distribution::normal, 1000, 13);
+  dups.insert(dups.end(), dups.begin(), dups.begin() + 300);
+  sets.push_back(dups);
+  for (const auto& pts : sets) {
+    INFO(pts.size() << " points");
+    pdt::Triangulation t;
+    const std::vector<pdt::InsertResult> res = t.insert_batch(pts);
+    REQUIRE(res.size() == pts.size());
+    std::size_t fresh = 0;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      REQUIRE(t.is_vertex(res[i].vertex));
+      REQUIRE(t.point(res[i].vertex) == pts[i]);
+      fresh += res[i].inserted;
+    }
+    REQUIRE(fresh == t.number_of_vertices());
+    require_valid(t);
+    require_same_as_cgal(t, pts);
+    // A second batch on a non-empty triangulation, then removal of the first.
+    std::vector<Point3> more = generated_points(pdt::Distribution::uniform, 500, pts.size());
+    t.insert_batch(more);
+    for (std::size_t i = 0; i < pts.size(); ++i) t.remove(res[i].vertex);
+    require_valid(t);
+    require_same_as_cgal(t, more);
+  }
+}
+
+TEST_CASE("insert_batch with a NaN anywhere inserts nothing", "[insert][error]") {
+  pdt::Triangulation t;
+  const std::vector<Point3> base = generated_points(pdt::Distribution::uniform, 200, 14);
+  t.insert_batch(base);
+  const TetList before = canonical_tets(t, base);
+  std::vector<Point3> bad = generated_points(pdt::Distribution::uniform, 100, 15);
+  bad[57].y = std::numeric_limits<double>::quiet_NaN();
+  try {
+    t.insert_batch(bad);
+    FAIL("no error");
+  } catch (const pdt::Error& e) {
+    REQUIRE(e.code() == pdt::ErrorCode::non_finite_coordinate);
+  }
+  REQUIRE(t.number_of_vertices() == base.size());
+  REQUIRE(canonical_tets(t, base) == before);
+  REQUIRE(t.insert_batch({}).empty());
+}

@@ -30,6 +30,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -90,6 +91,13 @@ class Triangulation {
 
   // Inserts p. Throws pdt::Error(non_finite_coordinate) for NaN/Inf and changes nothing.
   InsertResult insert(const Point3& p, Hint hint = {});
+  // Inserts a batch in an order of its own (CGAL's spatial sort, as CGAL's
+  // range insertion does): consecutive points are close, so it is about twice
+  // as fast as inserting the same points one by one in a random order. The
+  // result is the same, the triangulation being unique. Results come in the
+  // batch's order. Checks every point first: throws pdt::Error
+  // (non_finite_coordinate) naming the first bad one and inserts nothing.
+  std::vector<InsertResult> insert_batch(std::span<const Point3> points);
   // Undoes one insertion of v. Throws pdt::Error(unknown_vertex) for the infinite
   // vertex, an id never issued or a vertex already gone, and changes nothing.
   RemoveResult remove(VertexId v);

@@ -10,6 +10,8 @@
 // the resident-memory deltas (VmRSS from /proc/self/status) are measured
 // separately. The two final triangulations must have the same number of finite
 // cells (MISMATCH is printed otherwise).
+// Then batch mode: Triangulation::insert_batch(all) against CGAL's
+// insert(first, last), both spatially sorting the batch inside the timing.
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <malloc.h>
@@ -135,6 +137,9 @@ struct Row {
   std::size_t pdt_cells_after_insert = 0, cgal_cells_after_insert = 0;
   std::size_t pdt_finite = 0, cgal_finite = 0;
   std::size_t pdt_vertices = 0, cgal_vertices = 0;
+  // Batch mode: pdt insert_batch vs CGAL insert(first, last), both spatially sorted inside.
+  double pdt_batch = 0, cgal_batch = 0;
+  std::size_t pdt_batch_cells = 0, cgal_batch_cells = 0;
 };
 
 Row run_one(const Options& o, pdt::Distribution dist) {
@@ -219,6 +224,27 @@ Row run_one(const Options& o, pdt::Distribution dist) {
     row.cgal_finite = dt.number_of_finite_cells();
     row.cgal_vertices = dt.number_of_vertices();
   }
+
+  // ---- batch mode -----------------------------------------------------------------
+  {
+    settled_rss();
+    pdt::Triangulation t;
+    auto t0 = std::chrono::steady_clock::now();
+    t.insert_batch(pts);
+    row.pdt_batch = seconds_since(t0);
+    row.pdt_batch_cells = t.number_of_cells();
+  }
+  {
+    std::vector<K::Point_3> cpts;
+    cpts.reserve(pts.size());
+    for (const auto& p : pts) cpts.emplace_back(p.x, p.y, p.z);
+    settled_rss();
+    CgalDT dt;
+    auto t0 = std::chrono::steady_clock::now();
+    dt.insert(cpts.begin(), cpts.end());
+    row.cgal_batch = seconds_since(t0);
+    row.cgal_batch_cells = dt.number_of_cells();
+  }
   return row;
 }
 
@@ -244,10 +270,11 @@ int main(int argc, char** argv) {
               "", "", "", "s", "", "insert", "remove", "tet", "ins MiB", "rem MiB", "ins MiB", "rem MiB",
               "pdt / CGAL");
   int mismatches = 0;
+  std::vector<Row> rows;
   for (pdt::Distribution d : dists) {
-    Row r = run_one(o, d);
+    const Row& r = rows.emplace_back(run_one(o, d));
     const bool same = r.pdt_finite == r.cgal_finite && r.pdt_vertices == r.cgal_vertices &&
-                      r.pdt_cells_after_insert == r.cgal_cells_after_insert;
+                      r.pdt_cells_after_insert == r.cgal_cells_after_insert && r.pdt_batch_cells == r.cgal_batch_cells;
     mismatches += !same;
     std::printf(
         "%-8s %9zu | %9.3f %9.3f %6.2f | %8zu %9.3f %9.3f %6.2f | %8.2f %8.2f | %8.1f %9.1f %9.1f %9.1f %9.1f | "
@@ -262,6 +289,12 @@ int main(int argc, char** argv) {
                   r.pdt_cells_after_insert, r.cgal_cells_after_insert, r.pdt_vertices, r.cgal_vertices);
     std::fflush(stdout);
   }
+  std::printf("\nBatch mode: pdt Triangulation::insert_batch(all) vs CGAL insert(first, last); both spatially sort\n");
+  std::printf("%-8s %9s | %11s %11s %6s | %s\n", "dist", "N", "pdt batch s", "CGAL batch", "ratio", "cells pdt / CGAL");
+  for (const Row& r : rows)
+    std::printf("%-8s %9zu | %11.3f %11.3f %6.2f | %zu / %zu%s\n", r.dist.c_str(), r.n, r.pdt_batch, r.cgal_batch,
+                r.cgal_batch > 0 ? r.pdt_batch / r.cgal_batch : 0.0, r.pdt_batch_cells, r.cgal_batch_cells,
+                r.pdt_batch_cells == r.cgal_batch_cells ? "" : "  MISMATCH");
   if (mismatches) std::printf("\n%d distribution(s) with MISMATCH\n", mismatches);
   return mismatches ? 1 : 0;
 }

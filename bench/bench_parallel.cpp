@@ -404,14 +404,13 @@ struct Result {
   std::string first_error;  // pdt: the first failed operation's message
 };
 
-// pdt: insertions then removals of the first n_remove insertions. One
-// operation at a time (insert(p, cb), then remove_insertion(ticket, cb)), or
-// in batch mode, on CGAL parallel's terms: insert_batch(all), then
-// remove_insertions(the first n_remove), both spatially sorted inside.
-Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::size_t n_remove, unsigned threads,
-               bool batch) {
+// Runs body(t, engine, errors, r) on a fresh triangulation with an Engine of
+// `threads` workers in a tbb::task_arena(threads), then records the blocks,
+// the first failed operation and the final shape in r.
+template <class Body>
+Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body&& body) {
   Result r;
-  r.impl = batch ? "pdt_batch" : "pdt";
+  r.impl = impl;
   r.threads = threads;
   settle();
   {
@@ -423,36 +422,7 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
       opts.threads = threads;
       pdt::Engine e(t, box, opts);
       r.blocks = e.blocks_per_axis();
-      std::vector<pdt::Engine::Ticket> tickets(n_remove);
-
-      const pdt::EngineStats s0 = e.stats();
-      Stopwatch sw;
-      if (batch) {
-        const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
-        for (std::size_t k = 0; k < n_remove; ++k) tickets[k] = first + k;
-      } else {
-        for (std::size_t k = 0; k < pts.size(); ++k) {
-          pdt::Engine::Ticket tk = e.insert(pts[k], errors.callback());
-          if (k < n_remove) tickets[k] = tk;
-        }
-      }
-      e.drain();
-      const double t_ins = sw.seconds();
-      const pdt::EngineStats s1 = e.stats();
-      r.ins = phase_between(s0, s1, t_ins, pts.size());
-      r.ins.errors = errors.count.load();
-      r.shape.cells_after_insert = t.number_of_finite_cells();
-      r.bytes_per_tet = t.number_of_cells() ? double(t.memory_bytes()) / double(t.number_of_cells()) : 0;
-
-      sw.restart();
-      if (batch)
-        e.remove_insertions(tickets, errors.callback());
-      else
-        for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
-      e.drain();
-      const double t_rem = sw.seconds();
-      r.rem = phase_between(s1, e.stats(), t_rem, n_remove);
-      r.rem.errors = errors.count.load() - r.ins.errors;
+      body(t, e, errors, r);
       r.first_error = errors.first;
     });
     r.shape.finite_cells = t.number_of_finite_cells();
@@ -462,39 +432,61 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
   return r;
 }
 
+// pdt: insertions then removals of the first n_remove insertions. One
+// operation at a time (insert(p, cb), then remove_insertion(ticket, cb)), or
+// in batch mode, on CGAL parallel's terms: insert_batch(all), then
+// remove_insertions(the first n_remove), both spatially sorted inside.
+Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::size_t n_remove, unsigned threads,
+               bool batch) {
+  return with_engine(batch ? "pdt_batch" : "pdt", box, threads,
+                     [&](pdt::Triangulation& t, pdt::Engine& e, ErrorSink& errors, Result& r) {
+    std::vector<pdt::Engine::Ticket> tickets(n_remove);
+    const pdt::EngineStats s0 = e.stats();
+    Stopwatch sw;
+    if (batch) {
+      const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
+      for (std::size_t k = 0; k < n_remove; ++k) tickets[k] = first + k;
+    } else {
+      for (std::size_t k = 0; k < pts.size(); ++k) {
+        pdt::Engine::Ticket tk = e.insert(pts[k], errors.callback());
+        if (k < n_remove) tickets[k] = tk;
+      }
+    }
+    e.drain();
+    const double t_ins = sw.seconds();
+    const pdt::EngineStats s1 = e.stats();
+    r.ins = phase_between(s0, s1, t_ins, pts.size());
+    r.ins.errors = errors.count.load();
+    r.shape.cells_after_insert = t.number_of_finite_cells();
+    r.bytes_per_tet = t.number_of_cells() ? double(t.memory_bytes()) / double(t.number_of_cells()) : 0;
+
+    sw.restart();
+    if (batch)
+      e.remove_insertions(tickets, errors.callback());
+    else
+      for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
+    e.drain();
+    const double t_rem = sw.seconds();
+    r.rem = phase_between(s1, e.stats(), t_rem, n_remove);
+    r.rem.errors = errors.count.load() - r.ins.errors;
+  });
+}
+
 // pdt: a mixed stream (insertions and remove_insertion) replayed as one phase.
 Result run_pdt_stream(const pdt::OpStream& s, unsigned threads) {
-  Result r;
-  r.impl = "pdt";
-  r.threads = threads;
-  settle();
-  {
-    pdt::Triangulation t;
-    tbb::task_arena arena(static_cast<int>(threads));
-    arena.execute([&] {
-      ErrorSink errors;  // outlives the engine, whose callbacks use it
-      pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
-      opts.threads = threads;
-      pdt::Engine e(t, *s.box, opts);
-      r.blocks = e.blocks_per_axis();
-      const pdt::EngineStats s0 = e.stats();
-      Stopwatch sw;
-      for (const pdt::Operation& op : s.ops) {
-        if (op.kind == pdt::Operation::Kind::insert)
-          (void)e.insert(op.point, errors.callback());
-        else
-          e.remove_insertion(op.target, errors.callback());  // tickets number the insertions from 0, as the stream does
-      }
-      e.drain();
-      r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
-      r.mixed.errors = errors.count.load();
-      r.first_error = errors.first;
-    });
-    r.shape.finite_cells = t.number_of_finite_cells();
-    r.shape.vertices = t.number_of_vertices();
-  }
-  settle();
-  return r;
+  return with_engine("pdt", *s.box, threads, [&](pdt::Triangulation&, pdt::Engine& e, ErrorSink& errors, Result& r) {
+    const pdt::EngineStats s0 = e.stats();
+    Stopwatch sw;
+    for (const pdt::Operation& op : s.ops) {
+      if (op.kind == pdt::Operation::Kind::insert)
+        (void)e.insert(op.point, errors.callback());
+      else
+        e.remove_insertion(op.target, errors.callback());  // tickets number the insertions from 0, as the stream does
+    }
+    e.drain();
+    r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
+    r.mixed.errors = errors.count.load();
+  });
 }
 
 // For each of the first n_remove insertions: does undoing it make the vertex

@@ -276,7 +276,7 @@ void EngineState::ensure_grid() {
   const std::size_t ids = impl.verts.size();
   if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) return;
   // Over the live vertices' bounding box, about two vertices per slot.
-  impl.grid_rebuild(nullptr, std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)));
+  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)));
   impl.grid.built_for = std::size_t{1} << 60;  // the kernel never rebuilds it while the engine runs
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
 }
@@ -494,9 +494,9 @@ void EngineState::execute(Worker& w, QueuedOp* opp) {
   ++w.window_attempts;
   if (op.kind == OpKind::remove_insertion && tickets[op.ticket].state.load(std::memory_order_acquire) == 0) {
     // The insertion it undoes is not done yet: park it on the ticket.
+    TicketSlot& slot = tickets[op.ticket];
     w.in_op.store(false, std::memory_order_release);
     w.deferred.fetch_add(1, std::memory_order_relaxed);
-    TicketSlot& slot = tickets[op.ticket];
     slot.parked.store(opp, std::memory_order_seq_cst);
     if (slot.state.load(std::memory_order_seq_cst) != 0) {
       // Done meanwhile: take it back, unless the completion already did.

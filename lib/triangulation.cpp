@@ -1057,8 +1057,9 @@ void Triangulation::Impl::fill_hole(OpContext& ctx, VertexId v) {
 // ---------------------------------------------------------------------------
 void Triangulation::Impl::grid_update(OpContext& ctx, VertexId v) {
   if (is_small) return;
-  // Single-threaded: resize as the vertex count doubles. The engine sizes
-  // the grid for its domain up front and never rebuilds it while running.
+  // Single-threaded: resize as the vertex count doubles. Engine workers never
+  // rebuild here: the engine regrows the grid itself with the world stopped
+  // (EngineState::ensure_grid) and sets built_for out of reach meanwhile.
   if (!ctx.locking && static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed) + ctx.d_vertices) >=
                           2 * grid.built_for + 64) {
     fold_counters(ctx);
@@ -1088,7 +1089,7 @@ VertexId Triangulation::Impl::grid_lookup(const KPoint& p) const {
   return no_vertex;
 }
 
-void Triangulation::Impl::grid_rebuild(const double* box, std::size_t slots) {
+void Triangulation::Impl::grid_rebuild(std::size_t slots) {
   // Counts the live vertices itself: n_vertices lags while engine workers
   // hold unfolded deltas (this runs with the world stopped then).
   double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
@@ -1097,13 +1098,10 @@ void Triangulation::Impl::grid_rebuild(const double* box, std::size_t slots) {
   for (VertexId v = 1; v < bound; ++v) {
     if (verts[v].multiplicity == 0) continue;
     ++n;
-    if (box) continue;
     const KPoint& p = pt(v);
     const double c[3] = {p.x(), p.y(), p.z()};
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
   }
-  if (box)
-    for (int a = 0; a < 3; ++a) lo[a] = box[a], hi[a] = box[3 + a];
   // About 2 vertices per slot right after a rebuild, so few slots are empty.
   // Built aside and moved in: an allocation failure leaves the old grid.
   const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);

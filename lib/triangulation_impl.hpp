@@ -284,9 +284,9 @@ struct Triangulation::Impl {
 
   void grid_update(OpContext& ctx, VertexId v);
   VertexId grid_lookup(const KPoint& p) const;
-  // Rebuilds the jump grid over the live vertices, or over `box` (lo, hi) with
-  // about `slots` slots when given (the engine's domain).
-  void grid_rebuild(const double* box = nullptr, std::size_t slots = 0);
+  // Rebuilds the jump grid over the live vertices' bounding box, with about
+  // `slots` slots when given (the engine's capped size), else n/2.
+  void grid_rebuild(std::size_t slots = 0);
 
   bool validate(std::string* why) const;
 };

@@ -294,13 +294,6 @@ EngineRun replay_engine(pdt::Triangulation& t, const pdt::OpStream& s, const pdt
   return run;
 }
 
-void require_valid(const pdt::Triangulation& t) {
-  std::string why;
-  const bool ok = t.validate(&why);
-  INFO("validate: " << why);
-  REQUIRE(ok);
-}
-
 std::uint64_t total_multiplicity(const pdt::Triangulation& t) {
   std::uint64_t m = 0;
   for (pdt::VertexId v : t.vertices()) m += t.multiplicity(v);

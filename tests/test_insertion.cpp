@@ -33,13 +33,6 @@ std::vector<Point3> generated_points(pdt::Distribution dist, std::uint64_t n, st
   return pts;
 }
 
-void require_valid(const pdt::Triangulation& t) {
-  std::string why;
-  const bool ok = t.validate(&why);
-  INFO("validate: " << why);
-  REQUIRE(ok);
-}
-
 // Builds a triangulation of `order` (inserted in that order), checks it
 // against the reference computed for `pts` (same points, any order) and
 // returns its canonical form (indices into pts).

@@ -32,13 +32,6 @@ std::vector<Point3> generated_points(pdt::Distribution dist, std::uint64_t n, st
   return pts;
 }
 
-void require_valid(const pdt::Triangulation& t) {
-  std::string why;
-  const bool ok = t.validate(&why);
-  INFO("validate: " << why);
-  REQUIRE(ok);
-}
-
 // A triangulation with its own bookkeeping of the live insertions, so the
 // expected surviving point set is known independently of pdt.
 struct Tracked {

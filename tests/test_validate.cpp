@@ -23,13 +23,6 @@ void require_invalid(const pdt::Triangulation& t) {
   REQUIRE_FALSE(t.validate());
 }
 
-void require_valid(const pdt::Triangulation& t) {
-  std::string why;
-  const bool ok = t.validate(&why);
-  INFO("validate: " << why);
-  REQUIRE(ok);
-}
-
 pdt::CellId first_cell(const pdt::Triangulation& t, bool finite, pdt::CellId from = 0) {
   for (pdt::CellId c = from; c < t.cell_id_bound(); ++c)
     if (t.is_cell(c) && t.is_finite_cell(c) == finite) return c;

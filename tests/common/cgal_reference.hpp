@@ -196,6 +196,14 @@ inline bool all_positively_oriented(const pdt::Triangulation& t, std::string* wh
   return true;
 }
 
+// t.validate() holds; otherwise fails with what it reported.
+inline void require_valid(const pdt::Triangulation& t) {
+  std::string why;
+  const bool ok = t.validate(&why);
+  INFO("validate: " << why);
+  REQUIRE(ok);
+}
+
 // REQUIREs that t is CGAL's Delaunay triangulation of its own live vertices:
 // same dimension, same number of vertices and cells, same tetrahedra, and
 // every finite cell positively oriented.

@@ -41,75 +41,38 @@
 // Order: the main tables, then --interleaved, then --extreme. A configuration
 // running past --timeout (an engine livelock) prints HANG and exits 3; what
 // was printed and written to the CSV before stays.
-#ifndef CGAL_LINKED_WITH_TBB
-#define CGAL_LINKED_WITH_TBB 1  // CGAL's Parallel_tag code paths; pdt_internal links TBB
-#endif
-#include <CGAL/Delaunay_triangulation_3.h>
-#include <CGAL/Delaunay_triangulation_cell_base_3.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/Spatial_lock_grid_3.h>
-#include <CGAL/Triangulation_data_structure_3.h>
-#include <CGAL/Triangulation_vertex_base_3.h>
-#include <CGAL/version.h>
-#include <malloc.h>
-#include <sched.h>
-
-#include <algorithm>
-#include <atomic>
-#include <chrono>
-#include <condition_variable>
-#include <cstdarg>
-#include <cstdio>
-#include <cstdlib>
-#include <cstring>
-#include <fstream>
-#include <iostream>
-#include <mutex>
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
 #include <oneapi/tbb/version.h>
-#include <sstream>
+#include <CGAL/version.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
 #include <string>
 #include <thread>
-#include <unordered_map>
 #include <vector>
 
+#include "common/bench_util.hpp"
+#include "common/cgal_runners.hpp"
+#include "common/report.hpp"
+#include "common/watchdog.hpp"
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
 #include "pdt/triangulation.hpp"
-#include "sys_info.hpp"
+#include "support/sys_info.hpp"
 
-// CGAL's Parallel_tag containers allocate with tbb::scalable_allocator: the
-// benches link TBB::tbbmalloc for it (CMakeLists.txt).
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using CgalDT = CGAL::Delaunay_triangulation_3<K, CGAL::Default, CGAL::Fast_location>;
-using ParTds = CGAL::Triangulation_data_structure_3<CGAL::Triangulation_vertex_base_3<K>,
-                                                   CGAL::Delaunay_triangulation_cell_base_3<K>, CGAL::Parallel_tag>;
-using LockGrid = CGAL::Spatial_lock_grid_3<CGAL::Tag_priority_blocking>;
-using CgalParDT = CGAL::Delaunay_triangulation_3<K, ParTds, CGAL::Default, LockGrid>;
+using namespace pdt_bench;
+using pdt::support::Stopwatch;
 
-constexpr int lock_grid_cells_per_axis = 50;
 constexpr std::uint64_t extreme_points = 3000;
 constexpr int extreme_repeats = 5;
 constexpr double interleaved_fraction = 0.3;
-
-using pdt::detail::Stopwatch;
-
-// Returns freed heap to the OS so the next configuration starts clean.
-void settle() { ::malloc_trim(0); }
-double mib(double bytes) { return bytes / (1024.0 * 1024.0); }
-
-struct PointHash {
-  std::size_t operator()(const pdt::Point3& p) const {
-    std::size_t h = std::hash<double>()(p.x + 0.0);
-    h ^= std::hash<double>()(p.y + 0.0) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
-    h ^= std::hash<double>()(p.z + 0.0) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
-    return h;
-  }
-};
 
 // ---- options ------------------------------------------------------------------
 struct Options {
@@ -125,99 +88,25 @@ struct Options {
   double timeout = 3600;  // seconds one configuration may take before the run is declared hung; 0 = never
 };
 
-[[noreturn]] void usage(const char* prog, int code) {
-  std::fprintf(code ? stderr : stdout,
-               "usage: %s [--points N] [--threads LIST] [--dists LIST] [--remove-fraction F] [--extreme]\n"
-               "          [--interleaved] [--skip-cgal-parallel] [--seed S] [--csv FILE] [--timeout S]\n"
-               "  --points N            points per distribution (default 2000000)\n"
-               "  --threads LIST        comma-separated thread counts (default 1,2,4,8,16; 1 is always run)\n"
-               "  --dists LIST          comma-separated distributions (default uniform,normal,line)\n"
-               "  --remove-fraction F   fraction of the insertions undone after all of them, first inserted\n"
-               "                        first (default 0.1)\n"
-               "  --extreme             also §3.3 (Table 1): 3,000 normal points, insert then remove all,\n"
-               "                        1 and max threads\n"
-               "  --interleaved         also a refiner-like stream (RemovalOrder::interleaved, fraction 0.3)\n"
-               "  --skip-cgal-parallel  do not run CGAL's Parallel_tag triangulation\n"
-               "  --seed S              generator seed (default 1)\n"
-               "  --csv FILE            also write every measurement as a CSV row\n"
-               "  --timeout S           declare a configuration hung after S seconds (default 3600; 0 = never;\n"
-               "                        an extreme-case run: at most 120): print HANG and exit 3\n",
-               prog);
-  std::exit(code);
-}
-
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ','))
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 Options parse(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s: %s needs a value\n", argv[0], a.c_str());
-        usage(argv[0], 2);
-      }
-      return argv[++i];
-    };
-    auto unsigned_value = [](const std::string& v) {
-      std::size_t pos = 0;
-      unsigned long long x = std::stoull(v, &pos);
-      if (pos != v.size() || v[0] == '-') throw std::invalid_argument(v);
-      return x;
-    };
-    try {
-      if (a == "--points") {
-        o.points = unsigned_value(value());
-        if (o.points == 0) throw std::invalid_argument("0");
-      } else if (a == "--threads") {
-        o.threads.clear();
-        for (const auto& t : split(value())) {
-          unsigned long long x = unsigned_value(t);
-          if (x == 0 || x > 4096) throw std::invalid_argument(t);
-          o.threads.push_back(static_cast<unsigned>(x));
-        }
-        if (o.threads.empty()) throw std::invalid_argument("empty list");
-      } else if (a == "--dists") {
-        o.dists = split(value());
-        if (o.dists.empty()) throw std::invalid_argument("empty list");
-      } else if (a == "--remove-fraction") {
-        std::string v = value();
-        std::size_t pos = 0;
-        o.remove_fraction = std::stod(v, &pos);
-        if (pos != v.size() || !(o.remove_fraction >= 0 && o.remove_fraction <= 1)) throw std::invalid_argument(v);
-      } else if (a == "--extreme") {
-        o.extreme = true;
-      } else if (a == "--interleaved") {
-        o.interleaved = true;
-      } else if (a == "--skip-cgal-parallel") {
-        o.cgal_parallel = false;
-      } else if (a == "--seed") {
-        o.seed = unsigned_value(value());
-      } else if (a == "--csv") {
-        o.csv = value();
-      } else if (a == "--timeout") {
-        std::string v = value();
-        std::size_t pos = 0;
-        o.timeout = std::stod(v, &pos);
-        if (pos != v.size() || !(o.timeout >= 0)) throw std::invalid_argument(v);
-      } else if (a == "--help" || a == "-h") {
-        usage(argv[0], 0);
-      } else {
-        std::fprintf(stderr, "%s: unknown option %s\n", argv[0], a.c_str());
-        usage(argv[0], 2);
-      }
-    } catch (const std::logic_error&) {
-      std::fprintf(stderr, "%s: bad value for %s\n", argv[0], a.c_str());
-      usage(argv[0], 2);
-    }
-  }
+  bool skip_cgal_parallel = false;
+  ArgParser args(argv[0], "The paper's Tables 1-4 for pdt::Engine, against CGAL sequential and CGAL parallel");
+  args.count("--points", "points per distribution (default 2000000)", o.points, 1);
+  args.counts("--threads", "comma-separated thread counts (default 1,2,4,8,16; 1 is always run)", o.threads, 1, 4096);
+  args.list("--dists", "comma-separated distributions (default uniform,normal,line)", o.dists);
+  args.real("--remove-fraction", "fraction of the insertions undone after all of them, first inserted first "
+            "(default 0.1)", o.remove_fraction, 0, 1);
+  args.flag("--extreme", "also §3.3 (Table 1): 3,000 normal points, insert then remove all, 1 and max threads",
+            o.extreme);
+  args.flag("--interleaved", "also a refiner-like stream (RemovalOrder::interleaved, fraction 0.3)", o.interleaved);
+  args.flag("--skip-cgal-parallel", "do not run CGAL's Parallel_tag triangulation", skip_cgal_parallel);
+  args.count("--seed", "generator seed (default 1)", o.seed);
+  args.text("--csv", "also write every measurement as a CSV row to this file", o.csv);
+  args.real("--timeout", "declare a configuration hung after S seconds (default 3600; 0 = never; an extreme-case "
+            "run: at most 120): print HANG and exit 3", o.timeout, 0, 1e300);
+  args.parse(argc, argv);
+  o.cgal_parallel = !skip_cgal_parallel;
   // Speedup1 needs the 1-thread run; keep the order given otherwise, no repeats.
   std::vector<unsigned> ts{1};
   for (unsigned t : o.threads)
@@ -226,102 +115,14 @@ Options parse(int argc, char** argv) {
   return o;
 }
 
-// ---- watchdog -------------------------------------------------------------------
-// A configuration that never finishes (an engine that livelocks or loops) must
-// not eat a whole benchmark session: past its deadline the run prints HANG with
-// what was running (the tables and CSV rows so far are already out) and exits 3.
-class Watchdog {
- public:
-  Watchdog() : thread_([this] { loop(); }) {}
-  ~Watchdog() {
-    {
-      std::lock_guard<std::mutex> lock(m_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
-  void arm(const std::string& what, double seconds) {
-    {
-      std::lock_guard<std::mutex> lock(m_);
-      what_ = what;
-      seconds_ = seconds;
-      armed_ = seconds > 0;
-      const double capped = std::min(seconds, 1e9);  // "inf" or huge: no overflow of the time point
-      deadline_ = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                          std::chrono::duration<double>(capped));
-    }
-    cv_.notify_all();
-  }
-  void disarm() {
-    std::lock_guard<std::mutex> lock(m_);
-    armed_ = false;
-  }
-
- private:
-  void loop() {
-    std::unique_lock<std::mutex> lock(m_);
-    while (!stop_) {
-      if (!armed_) {
-        cv_.wait(lock);
-        continue;
-      }
-      if (cv_.wait_until(lock, deadline_) == std::cv_status::timeout && armed_ && !stop_ &&
-          std::chrono::steady_clock::now() >= deadline_) {
-        std::fflush(stdout);
-        std::printf("\nHANG: %s did not finish within %g s; aborting (exit 3)\n", what_.c_str(), seconds_);
-        std::fprintf(stderr, "HANG: %s did not finish within %g s; aborting (exit 3)\n", what_.c_str(), seconds_);
-        std::fflush(stdout);
-        std::fflush(stderr);
-        std::_Exit(3);
-      }
-    }
-  }
-  std::mutex m_;
-  std::condition_variable cv_;
-  std::string what_;
-  double seconds_ = 0;
-  bool armed_ = false, stop_ = false;
-  std::chrono::steady_clock::time_point deadline_;
-  std::thread thread_;
-};
-
 Watchdog* watchdog = nullptr;  // set by main
 double config_timeout = 0;
 
 // Arms the watchdog for the duration of one configuration.
-struct Guard {
-  Guard(const std::string& what, double seconds) {
-    if (watchdog) watchdog->arm(what, seconds);
-  }
-  ~Guard() {
-    if (watchdog) watchdog->disarm();
-  }
+struct Guard : WatchdogGuard {
+  Guard(const std::string& what, double seconds) : WatchdogGuard(watchdog, what, seconds) {}
 };
 constexpr double extreme_run_timeout = 120;
-
-// ---- machine ------------------------------------------------------------------
-std::string cpu_model() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      auto colon = line.find(':');
-      if (colon != std::string::npos) {
-        std::string m = line.substr(colon + 1);
-        m.erase(0, m.find_first_not_of(" \t"));
-        return m;
-      }
-    }
-  return "unknown";
-}
-
-int affinity_cpus() {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (::sched_getaffinity(0, sizeof set, &set) != 0) return 0;
-  return CPU_COUNT(&set);
-}
 
 // ---- measurements ---------------------------------------------------------------
 struct Phase {
@@ -387,13 +188,6 @@ Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double
   return p;
 }
 
-// The final state of a triangulation, to compare pdt with CGAL.
-struct Shape {
-  std::size_t cells_after_insert = 0;  // finite cells once every insertion is done
-  std::size_t finite_cells = 0;        // at the end
-  std::size_t vertices = 0;            // at the end
-};
-
 struct Result {
   std::string impl;  // pdt, cgal_seq, cgal_par
   unsigned threads = 1;
@@ -419,7 +213,7 @@ Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body
     arena.execute([&] {
       ErrorSink errors;  // outlives the engine, whose callbacks use it
       pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
-      opts.threads = threads;
+      opts.workers = threads;
       pdt::Engine e(t, box, opts);
       r.blocks = e.blocks_per_axis();
       body(t, e, errors, r);
@@ -489,150 +283,19 @@ Result run_pdt_stream(const pdt::OpStream& s, unsigned threads) {
   });
 }
 
-// For each of the first n_remove insertions: does undoing it make the vertex
-// disappear (the last undone insertion of its point)? CGAL has no multiplicity.
-std::vector<char> last_removals(const std::vector<pdt::Point3>& pts, std::size_t n_remove) {
-  std::vector<char> out(n_remove, 0);
-  std::unordered_map<pdt::Point3, std::uint32_t, PointHash> count;
-  count.reserve(pts.size() * 2);
-  for (const auto& p : pts) ++count[p];
-  for (std::size_t k = 0; k < n_remove; ++k) out[k] = --count[pts[k]] == 0;
-  return out;
-}
-
-std::vector<K::Point_3> to_cgal(const std::vector<pdt::Point3>& pts) {
-  std::vector<K::Point_3> c;
-  c.reserve(pts.size());
-  for (const auto& p : pts) c.emplace_back(p.x, p.y, p.z);
-  return c;
-}
-
-// CGAL sequential: one point at a time, no spatial sort; then remove(vh) one at a time.
-Result run_cgal_seq(const std::vector<pdt::Point3>& pts, const std::vector<char>& cgal_removes) {
+// CGAL's runs in the Result form the tables and the CSV take.
+Result from_cgal(const char* impl, unsigned threads, const CgalRun& c, std::size_t ops_insert, std::size_t ops_remove,
+                 bool mixed = false) {
   Result r;
-  r.impl = "cgal_seq";
-  settle();
-  {
-    const std::size_t n_remove = cgal_removes.size();
-    std::vector<K::Point_3> cpts = to_cgal(pts);
-    std::vector<CgalDT::Vertex_handle> vh(n_remove);
-    CgalDT dt;
-    Stopwatch sw;
-    for (std::size_t k = 0; k < cpts.size(); ++k) {
-      CgalDT::Vertex_handle v = dt.insert(cpts[k]);
-      if (k < n_remove) vh[k] = v;
-    }
-    r.ins.ran = true;
-    r.ins.seconds = sw.seconds();
-    r.ins.ops = cpts.size();
-    r.shape.cells_after_insert = dt.number_of_finite_cells();
-    sw.restart();
-    for (std::size_t k = 0; k < n_remove; ++k)
-      if (cgal_removes[k]) dt.remove(vh[k]);
-    r.rem.ran = true;
-    r.rem.seconds = sw.seconds();
-    r.rem.ops = n_remove;
-    r.shape.finite_cells = dt.number_of_finite_cells();
-    r.shape.vertices = dt.number_of_vertices();
-  }
-  settle();
-  return r;
-}
-
-// CGAL sequential replay of a mixed stream.
-Result run_cgal_seq_stream(const pdt::OpStream& s) {
-  Result r;
-  r.impl = "cgal_seq";
-  settle();
-  {
-    // Which removals make a vertex disappear (CGAL has no multiplicity).
-    std::vector<char> really(s.ops.size(), 1);
-    std::vector<K::Point_3> ins_pts;
-    {
-      std::vector<pdt::Point3> inserted;
-      std::unordered_map<pdt::Point3, std::uint32_t, PointHash> count;
-      for (std::size_t i = 0; i < s.ops.size(); ++i) {
-        const pdt::Operation& op = s.ops[i];
-        if (op.kind == pdt::Operation::Kind::insert) {
-          inserted.push_back(op.point);
-          ++count[op.point];
-        } else {
-          really[i] = --count[inserted[op.target]] == 0;
-        }
-      }
-      ins_pts = to_cgal(inserted);
-    }
-    std::vector<CgalDT::Vertex_handle> vh(ins_pts.size());
-    CgalDT dt;
-    std::size_t next = 0;
-    Stopwatch sw;
-    for (std::size_t i = 0; i < s.ops.size(); ++i) {
-      const pdt::Operation& op = s.ops[i];
-      if (op.kind == pdt::Operation::Kind::insert) {
-        vh[next] = dt.insert(ins_pts[next]);
-        ++next;
-      } else if (really[i]) {
-        dt.remove(vh[op.target]);
-      }
-    }
-    r.mixed.ran = true;
-    r.mixed.seconds = sw.seconds();
-    r.mixed.ops = s.ops.size();
-    r.shape.finite_cells = dt.number_of_finite_cells();
-    r.shape.vertices = dt.number_of_vertices();
-  }
-  settle();
-  return r;
-}
-
-// CGAL parallel (Parallel_tag + spatial lock grid) in an arena of `threads`:
-// batch insertion (spatially sorted by CGAL), then batch removal.
-Result run_cgal_par(const std::vector<pdt::Point3>& pts, const pdt::Box& box, const std::vector<char>& cgal_removes,
-                    unsigned threads) {
-  Result r;
-  r.impl = "cgal_par";
+  r.impl = impl;
   r.threads = threads;
-  settle();
-  {
-    const std::size_t n_remove = cgal_removes.size();
-    std::vector<K::Point_3> cpts = to_cgal(pts);
-    tbb::task_arena arena(static_cast<int>(threads));
-    LockGrid lock(CGAL::Bbox_3(box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y, box.hi.z), lock_grid_cells_per_axis);
-    CgalParDT dt(&lock);
-    arena.execute([&] {
-      Stopwatch sw;
-      dt.insert(cpts.begin(), cpts.end());
-      r.ins.ran = true;
-      r.ins.seconds = sw.seconds();
-      r.ins.ops = cpts.size();
-    });
-    r.shape.cells_after_insert = dt.number_of_finite_cells();
-
-    // The handles of the first n_remove points (untimed): through a point -> vertex map.
-    std::vector<CgalParDT::Vertex_handle> to_remove;
-    {
-      std::unordered_map<pdt::Point3, CgalParDT::Vertex_handle, PointHash> where;
-      where.reserve(dt.number_of_vertices() * 2);
-      for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
-        const K::Point_3& p = v->point();
-        where.emplace(pdt::Point3{p.x(), p.y(), p.z()}, v);
-      }
-      to_remove.reserve(n_remove);
-      for (std::size_t k = 0; k < n_remove; ++k)
-        if (cgal_removes[k]) to_remove.push_back(where.at(pts[k]));
-    }
-    settle();
-    arena.execute([&] {
-      Stopwatch sw;
-      dt.remove(to_remove.begin(), to_remove.end());
-      r.rem.ran = true;
-      r.rem.seconds = sw.seconds();
-      r.rem.ops = n_remove;
-    });
-    r.shape.finite_cells = dt.number_of_finite_cells();
-    r.shape.vertices = dt.number_of_vertices();
+  r.shape = c.shape;
+  if (mixed) {
+    r.mixed = {true, c.mixed_seconds, ops_insert + ops_remove};
+  } else {
+    r.ins = {true, c.insert_seconds, ops_insert};
+    r.rem = {true, c.remove_seconds, ops_remove};
   }
-  settle();
   return r;
 }
 
@@ -685,49 +348,6 @@ struct Csv {
   }
 };
 
-// A table with a label column and two groups of per-thread columns.
-class Table {
- public:
-  Table(std::vector<std::string> groups, std::vector<unsigned> threads) : groups_(std::move(groups)), threads_(threads) {}
-  // cells: groups_.size() * threads_.size() strings, group-major.
-  void add(const std::string& label, std::vector<std::string> cells) { rows_.push_back({label, std::move(cells)}); }
-  void print() const {
-    const int lw = 38, cw = 10;
-    const int gw = cw * int(threads_.size());
-    std::printf("%-*s", lw, "");
-    for (const auto& g : groups_) std::printf(" |%*s%-*s", (gw - int(g.size())) / 2, "", gw - (gw - int(g.size())) / 2, g.c_str());
-    std::printf("\n%-*s", lw, "#Threads");
-    for (std::size_t g = 0; g < groups_.size(); ++g) {
-      std::printf(" |");
-      for (unsigned t : threads_) std::printf("%*u", cw, t);
-    }
-    std::printf("\n");
-    for (const auto& row : rows_) {
-      std::printf("%-*s", lw, row.first.c_str());
-      for (std::size_t i = 0; i < row.second.size(); ++i) {
-        if (i % threads_.size() == 0) std::printf(" |");
-        std::printf("%*s", cw, row.second[i].c_str());
-      }
-      std::printf("\n");
-    }
-    std::fflush(stdout);
-  }
-
- private:
-  std::vector<std::string> groups_;
-  std::vector<unsigned> threads_;
-  std::vector<std::pair<std::string, std::vector<std::string>>> rows_;
-};
-
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-std::string fmt_u(std::uint64_t v) { return std::to_string(v); }
-// num / den as "%.2f", "-" when either is not positive (a phase with no operations).
-std::string fmt_ratio(double num, double den) { return num > 0 && den > 0 ? fmt("%.2f", num / den) : "-"; }
-
 // Compares a final state with CGAL sequential's; prints MISMATCH and returns false if they differ.
 bool check(const char* what, unsigned threads, const Shape& s, const Shape& ref, bool check_insert = true) {
   const bool ok = s.finite_cells == ref.finite_cells && s.vertices == ref.vertices &&
@@ -760,45 +380,18 @@ bool check_errors(const char* what, const Result& r) {
   return note.empty();
 }
 
-void progress(const char* fmt_str, ...) __attribute__((format(printf, 1, 2)));
-void progress(const char* fmt_str, ...) {
-  va_list ap;
-  va_start(ap, fmt_str);
-  std::vfprintf(stderr, fmt_str, ap);
-  va_end(ap);
-  std::fflush(stderr);
-}
-
-std::vector<pdt::Point3> points_of(const pdt::OpStream& s) {
-  std::vector<pdt::Point3> pts;
-  pts.reserve(s.ops.size());
-  for (const auto& op : s.ops)
-    if (op.kind == pdt::Operation::Kind::insert) pts.push_back(op.point);
-  return pts;
-}
-
 // ---- experiments ----------------------------------------------------------------
 // Tables 2-4: one distribution. Returns the number of mismatches.
 int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   const std::string name = pdt::to_string(dist);
-  std::vector<pdt::Point3> pts;
-  pdt::Box box;
-  {
-    pdt::GenerateOptions g;
-    g.dist = dist;
-    g.points = o.points;
-    g.seed = o.seed;
-    pdt::OpStream s = pdt::generate(g);
-    box = *s.box;
-    pts = points_of(s);
-  }
+  const auto [pts, box] = generated_points(dist, o.points, o.seed);
   const std::size_t n_remove = static_cast<std::size_t>(o.remove_fraction * double(pts.size()));
   const std::vector<char> cgal_removes = last_removals(pts, n_remove);
 
   progress("[%s] CGAL sequential...\n", name.c_str());
   const Result seq = [&] {
     Guard g(name + ": CGAL sequential", config_timeout);
-    return run_cgal_seq(pts, cgal_removes);
+    return from_cgal("cgal_seq", 1, cgal_sequential(pts, cgal_removes), pts.size(), n_remove);
   }();
   std::vector<Result> mine, batch, par;
   for (unsigned t : o.threads) {
@@ -815,7 +408,7 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
     if (o.cgal_parallel) {
       progress("[%s] CGAL parallel, %u thread(s)...\n", name.c_str(), t);
       Guard g(name + ": CGAL parallel with " + std::to_string(t) + " thread(s)", config_timeout);
-      par.push_back(run_cgal_par(pts, box, cgal_removes, t));
+      par.push_back(from_cgal("cgal_par", t, cgal_parallel(pts, box, cgal_removes, t), pts.size(), n_remove));
     }
   }
 
@@ -876,7 +469,7 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
     bad += !check("pdt batch", r.threads, r.shape, seq.shape) + !check_errors("pdt batch", r);
   for (const auto& r : par) bad += !check("CGAL parallel", r.threads, r.shape, seq.shape);
   std::printf("  check: %s\n", bad ? "MISMATCH (see above)" : "every final triangulation has CGAL seq's cell and vertex counts");
-  std::printf("  peak RSS so far: %.1f MiB\n", mib(double(pdt::detail::peak_rss_bytes())));
+  std::printf("  peak RSS so far: %.1f MiB\n", mib(double(pdt::support::peak_rss_bytes())));
 
   for (std::size_t i = 0; i < nt; ++i) {
     const double p0 = o.cgal_parallel ? par[i].ins.seconds : 0, p1 = o.cgal_parallel ? par[i].rem.seconds : 0;
@@ -896,22 +489,12 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
 
 // Table 1 (§3.3): 3,000 normal points, insert all then remove all.
 int extreme_table(const Options& o, Csv& csv) {
-  std::vector<pdt::Point3> pts;
-  pdt::Box box;
-  {
-    pdt::GenerateOptions g;
-    g.dist = pdt::Distribution::normal;
-    g.points = extreme_points;
-    g.seed = o.seed;
-    pdt::OpStream s = pdt::generate(g);
-    box = *s.box;
-    pts = points_of(s);
-  }
+  const auto [pts, box] = generated_points(pdt::Distribution::normal, extreme_points, o.seed);
   const unsigned tmax = *std::max_element(o.threads.begin(), o.threads.end());
   std::vector<unsigned> ts{1};
   if (tmax > 1) ts.push_back(tmax);
   progress("[extreme] CGAL sequential...\n");
-  const Result seq = run_cgal_seq(pts, last_removals(pts, pts.size()));
+  const Result seq = from_cgal("cgal_seq", 1, cgal_sequential(pts, last_removals(pts, pts.size())), pts.size(), pts.size());
   progress("[extreme] pdt, %zu points, threads 1 and %u, %d runs each...\n", pts.size(), tmax, extreme_repeats);
 
   // Per thread count: median time of each phase; rollback ratio: the worst run.
@@ -1014,7 +597,7 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   progress("[%s interleaved] CGAL sequential...\n", name.c_str());
   const Result seq = [&] {
     Guard g(name + " interleaved: CGAL sequential", config_timeout);
-    return run_cgal_seq_stream(s);
+    return from_cgal("cgal_seq", 1, cgal_sequential_stream(s), s.insert_count(), s.remove_count(), true);
   }();
   std::vector<Result> mine;
   for (unsigned t : o.threads) {
@@ -1106,7 +689,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
   }
-  std::printf("\npeak RSS: %.1f MiB\n", mib(double(pdt::detail::peak_rss_bytes())));
+  std::printf("\npeak RSS: %.1f MiB\n", mib(double(pdt::support::peak_rss_bytes())));
   if (mismatches)
     std::printf("\n%d MISMATCH(ES): a final triangulation differs from CGAL's, or pdt operations failed\n", mismatches);
   return mismatches ? 1 : 0;

@@ -38,7 +38,7 @@ int main() {
     pdt::Engine engine(t, pdt::Box{{0, 0, 0}, {1, 1, 1}});
     for (int i = 0; i < 100000; ++i) refine_one(engine, {u(rng), u(rng), u(rng)}, i % 10 != 0);
     engine.drain();
-    std::printf("engine: %u workers, %llu operations\n", engine.threads(),
+    std::printf("engine: %u workers, %llu operations\n", engine.workers(),
                 static_cast<unsigned long long>(engine.stats().total().completed));
   }
   std::string why;

@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "pdt/io.hpp"
+#include "point_checks.hpp"
 
 namespace pdt {
 
@@ -105,7 +106,7 @@ MeshCheck check_mesh(const Mesh& mesh) {
   P.reserve(np);
   for (std::size_t i = 0; i < np; ++i) {
     const Point3& p = mesh.points[i];
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+    if (!detail::is_finite(p))
       return fail(r, pt_str(i) + " has a NaN or infinite coordinate");
     P.emplace_back(p.x, p.y, p.z);
   }

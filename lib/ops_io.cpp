@@ -18,6 +18,7 @@
 #include "io_util.hpp"
 #include "pdt/error.hpp"
 #include "pdt/ops.hpp"
+#include "point_checks.hpp"
 
 namespace pdt {
 
@@ -37,27 +38,8 @@ using detail::NumStatus;
 constexpr char kMagic[8] = {'P', 'D', 'T', 'O', 'P', 'S', '1', '\0'};
 constexpr const char* kExpectedForms = "expected 'i x y z', 'r k' or 'box x0 y0 z0 x1 y1 z1'";
 
-std::string fmt_point(const Point3& p) {
-  std::string s = "(";
-  detail::append_double(s, p.x);
-  s += ", ";
-  detail::append_double(s, p.y);
-  s += ", ";
-  detail::append_double(s, p.z);
-  s += ")";
-  return s;
-}
-
-// Why a box is unusable, or nullptr.
-const char* box_problem(const Box& b) {
-  const double v[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
-  for (double d : v)
-    if (!std::isfinite(d)) return "has a non-finite coordinate";
-  if (b.lo.x > b.hi.x || b.lo.y > b.hi.y || b.lo.z > b.hi.z) return "has a lower corner above its upper corner";
-  return nullptr;
-}
-
-bool finite(const Point3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+using detail::box_problem;
+using detail::is_finite;
 
 // Tracks which insertions are live, to validate 'r k'.
 struct LiveSet {
@@ -102,7 +84,7 @@ OpStream read_text(InputFile& f) {
       op.kind = Operation::Kind::insert;
       op.point = {c[0], c[1], c[2]};
       if (st.box && !st.box->contains(op.point))
-        f.fail("point " + fmt_point(op.point) + " is outside the box declared on line " + std::to_string(box_line) +
+        f.fail("point " + detail::format_point(op.point) + " is outside the box declared on line " + std::to_string(box_line) +
                "; expected every inserted point inside the box");
       st.ops.push_back(op);
       live.live.push_back(1);
@@ -193,9 +175,9 @@ OpStream read_binary(InputFile& f) {
       if (f.read_bytes(rec, 24) != 24) fail_bin(f, where(), "file ends inside an insertion record (kind + 3 x f64)");
       op.kind = Operation::Kind::insert;
       op.point = {load_f64(rec), load_f64(rec + 8), load_f64(rec + 16)};
-      if (!finite(op.point)) fail_bin(f, where(), "insertion of a point with a NaN or infinite coordinate");
+      if (!is_finite(op.point)) fail_bin(f, where(), "insertion of a point with a NaN or infinite coordinate");
       if (st.box && !st.box->contains(op.point))
-        fail_bin(f, where(), "point " + fmt_point(op.point) + " is outside the stream's box");
+        fail_bin(f, where(), "point " + detail::format_point(op.point) + " is outside the stream's box");
       live.live.push_back(1);
     } else if (kind == 1) {
       if (f.read_bytes(rec, 8) != 8) fail_bin(f, where(), "file ends inside a removal record (kind + u64)");
@@ -224,9 +206,9 @@ void validate_for_write(const OpStream& s) {
   for (std::size_t i = 0; i < s.ops.size(); ++i) {
     const Operation& op = s.ops[i];
     if (op.kind == Operation::Kind::insert) {
-      if (!finite(op.point)) bad("operation " + std::to_string(i) + " inserts a point with a NaN or infinite coordinate");
+      if (!is_finite(op.point)) bad("operation " + std::to_string(i) + " inserts a point with a NaN or infinite coordinate");
       if (s.box && !s.box->contains(op.point))
-        bad("operation " + std::to_string(i) + " inserts " + fmt_point(op.point) + ", outside the box");
+        bad("operation " + std::to_string(i) + " inserts " + detail::format_point(op.point) + ", outside the box");
       live.live.push_back(1);
     } else if (op.kind == Operation::Kind::remove) {
       if (const char* why = live.remove(op.target))

@@ -16,6 +16,7 @@
 
 #include "pdt/error.hpp"
 #include "pdt/io.hpp"
+#include "point_checks.hpp"
 
 namespace pdt {
 namespace detail {
@@ -281,7 +282,7 @@ std::vector<Point3> read_ply(InputFile& f) {
   std::vector<Point3> pts;
   pts.reserve(sane_reserve(ve.count));
   auto check = [&](const Point3& p, std::uint64_t k) {
-    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+    if (!detail::is_finite(p))
       f.fail("vertex " + std::to_string(k) + " has a NaN or infinite coordinate");
   };
 
@@ -376,7 +377,7 @@ std::vector<Point3> read_ply(InputFile& f) {
         const unsigned char* r = scratch.data() + j * stride;
         Point3 p{ply_value(type[0], r + off[0], big), ply_value(type[1], r + off[1], big),
                  ply_value(type[2], r + off[2], big)};
-        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        if (!detail::is_finite(p))
           throw Error(ErrorCode::bad_format, where("vertex", k) + ": NaN or infinite coordinate");
         pts.push_back(p);
       }
@@ -386,7 +387,7 @@ std::vector<Point3> read_ply(InputFile& f) {
       if (!ply_binary_instance(f, ve, big, vals, scratch))
         throw Error(ErrorCode::bad_format, where("vertex", k) + ": file ends inside the vertex data");
       Point3 p{vals[static_cast<std::size_t>(ix)], vals[static_cast<std::size_t>(iy)], vals[static_cast<std::size_t>(iz)]};
-      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      if (!detail::is_finite(p))
         throw Error(ErrorCode::bad_format, where("vertex", k) + ": NaN or infinite coordinate");
       pts.push_back(p);
     }

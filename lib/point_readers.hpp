@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "io_util.hpp"
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 
 namespace pdt::detail {
 

@@ -12,10 +12,16 @@
 
 #include <algorithm>
 
+#include "pdt/geometry.hpp"
+
 namespace pdt::detail {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 using KPoint = Kernel::Point_3;
+
+// A user's point as the kernel stores it: +0.0 turns -0.0 into +0.0, so
+// equal points have equal bits.
+inline KPoint to_kpoint(const Point3& p) { return KPoint(p.x + 0.0, p.y + 0.0, p.z + 0.0); }
 
 inline int orient(const KPoint& a, const KPoint& b, const KPoint& c, const KPoint& d) {
   return static_cast<int>(CGAL::orientation(a, b, c, d));

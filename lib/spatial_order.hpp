@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 
 namespace pdt::detail {
 

@@ -1,4 +1,4 @@
-// Triangulation::Impl::validate: the invariants I1..I5 of triangulation_impl.hpp.
+// Triangulation::Impl::validate: the invariants I1..I6 of triangulation_impl.hpp.
 #include <sstream>
 #include <unordered_set>
 
@@ -53,17 +53,12 @@ bool Triangulation::Impl::validate(std::string* why) const {
     if (flat.size() != n_vertices) return fail(f << "flat list holds " << flat.size() << " of " << n_vertices);
     for (std::size_t i = 0; i < flat.size(); ++i)
       if (verts[flat[i]].cell != i) return fail(f << "flat vertex " << flat[i] << " has a wrong position");
-    int expect = -1;
-    const KPoint* b[3] = {nullptr, nullptr, nullptr};
-    for (VertexId v : flat) {
-      const KPoint& q = pt(v);
-      if (expect == -1) b[0] = &q, expect = 0;
-      else if (expect == 0) b[1] = &q, expect = 1;
-      else if (expect == 1 && !CGAL::collinear(*b[0], *b[1], q)) b[2] = &q, expect = 2;
-      else if (expect == 2 && detail::orient(*b[0], *b[1], *b[2], q) != 0)
+    detail::AffineBasis spanned;
+    for (VertexId v : flat)
+      if (spanned.offer(v, pt(v)) && spanned.dimension() == 3)
         return fail(f << "dimension " << dim << " but vertex " << v << " is off the plane of the others");
-    }
-    if (expect != dim) return fail(f << "dimension " << dim << " but the vertices span " << expect);
+    if (spanned.dimension() != dim)
+      return fail(f << "dimension " << dim << " but the vertices span " << spanned.dimension());
     return true;
   }
 

@@ -27,6 +27,8 @@
 #include <vector>
 
 #include "common/cgal_reference.hpp"
+#include "common/point_sets.hpp"
+#include "common/streams.hpp"
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
@@ -60,88 +62,6 @@ constexpr unsigned kThreadCounts[] = {1, 2, 4, 8, 16};
 constexpr pdt::Distribution kDistributions[] = {pdt::Distribution::uniform, pdt::Distribution::normal,
                                                 pdt::Distribution::line, pdt::Distribution::grid,
                                                 pdt::Distribution::sphere};
-
-// -- streams -------------------------------------------------------------------
-pdt::OpStream generated(pdt::Distribution dist, std::uint64_t n, double remove_fraction, pdt::RemovalOrder order,
-                        std::uint64_t seed = 7) {
-  pdt::GenerateOptions o;
-  o.dist = dist;
-  o.points = n;
-  o.remove_fraction = remove_fraction;
-  o.removal_order = order;
-  o.seed = seed;
-  return pdt::generate(o);
-}
-
-pdt::Box bounding_box(const std::vector<Point3>& pts) {
-  pdt::Box b{pts.front(), pts.front()};
-  for (const auto& p : pts) {
-    b.lo = {std::min(b.lo.x, p.x), std::min(b.lo.y, p.y), std::min(b.lo.z, p.z)};
-    b.hi = {std::max(b.hi.x, p.x), std::max(b.hi.y, p.y), std::max(b.hi.z, p.z)};
-  }
-  return b;
-}
-
-// A stream inserting pts in order; the first floor(F * n) insertions are undone,
-// insertion k's removal right after insertion k + d, d uniform in
-// [0, min(1024, n-1-k)] (generate's interleaved order), or all at the end.
-pdt::OpStream stream_of(const std::vector<Point3>& pts, double remove_fraction, std::uint64_t seed,
-                        bool interleaved = true) {
-  const std::size_t n = pts.size();
-  const auto m = static_cast<std::size_t>(std::floor(remove_fraction * static_cast<double>(n)));
-  std::vector<std::vector<std::uint64_t>> after(n);
-  std::mt19937_64 rng(seed);
-  for (std::size_t k = 0; k < m; ++k) {
-    std::size_t at = n - 1;
-    if (interleaved) at = k + rng() % (std::min<std::size_t>(1024, n - 1 - k) + 1);
-    after[at].push_back(k);
-  }
-  pdt::OpStream s;
-  s.box = bounding_box(pts);
-  for (std::size_t i = 0; i < n; ++i) {
-    pdt::Operation ins;
-    ins.kind = pdt::Operation::Kind::insert;
-    ins.point = pts[i];
-    s.ops.push_back(ins);
-    for (std::uint64_t k : after[i]) {
-      pdt::Operation rem;
-      rem.kind = pdt::Operation::Kind::remove;
-      rem.target = k;
-      s.ops.push_back(rem);
-    }
-  }
-  return s;
-}
-
-// The points whose insertions the stream leaves standing (with repetitions).
-std::vector<Point3> survivors(const pdt::OpStream& s) {
-  std::vector<Point3> pts;
-  std::vector<bool> alive;
-  for (const auto& op : s.ops) {
-    if (op.kind == pdt::Operation::Kind::insert) {
-      pts.push_back(op.point);
-      alive.push_back(true);
-    } else {
-      REQUIRE(op.target < alive.size());
-      REQUIRE(alive[op.target]);
-      alive[op.target] = false;
-    }
-  }
-  std::vector<Point3> out;
-  for (std::size_t i = 0; i < pts.size(); ++i)
-    if (alive[i]) out.push_back(pts[i]);
-  return out;
-}
-
-void replay_sequential(pdt::Triangulation& t, const pdt::OpStream& s) {
-  std::vector<pdt::VertexId> ids;
-  for (const auto& op : s.ops) {
-    if (op.kind == pdt::Operation::Kind::insert)
-      ids.push_back(t.insert(op.point).vertex);
-    else
-      t.remove(ids.at(op.target));
-  }
-}
 
 // Collects the errors operations report through their callbacks (none is expected:
 // a valid stream's operations cannot fail).
@@ -250,7 +170,7 @@ struct EngineRun {
 
 pdt::EngineOptions options_with(unsigned threads) {
   pdt::EngineOptions o;  // not from the environment: the test decides
-  o.threads = threads;
+  o.workers = threads;
   o.grid_slots = 1u << 18;
   return o;
 }
@@ -263,7 +183,7 @@ EngineRun replay_engine(pdt::Triangulation& t, const pdt::OpStream& s, const pdt
   ErrorSink errors;
   auto body = [&](tbb::task_arena* arena) {
     pdt::Engine e(t, box, o, arena);
-    Watchdog watchdog(e, std::to_string(s.ops.size()) + " operations, " + std::to_string(o.threads) + " workers");
+    Watchdog watchdog(e, std::to_string(s.ops.size()) + " operations, " + std::to_string(o.workers) + " workers");
     std::vector<pdt::Engine::Ticket> tickets;
     if (barrier) {
       pdt::OpStream head, tail;
@@ -278,7 +198,7 @@ EngineRun replay_engine(pdt::Triangulation& t, const pdt::OpStream& s, const pdt
     }
     e.drain();
     run.stats = e.stats();
-    run.threads = e.threads();
+    run.threads = e.workers();
     run.blocks = e.blocks_per_axis();
   };
   if (mode == ArenaMode::caller_default) {
@@ -786,7 +706,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   o.contention_low = 1.0;
   o.contention_high = 1.0;
   o.contention_window = 1;
-  pdt::OpContext holder(999, true);
+  pdt::detail::OpContext holder(999, true);
   ErrorSink errors;
   bool slept = false, removed_while_held = false;
   std::atomic<int> removal_done{0};
@@ -794,7 +714,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   tbb::task_arena arena(2);
   arena.execute([&] {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
-    REQUIRE(t.impl().lock_exclusive(holder, victim));
+    REQUIRE(pdt::detail::impl_of(t).lock_exclusive(holder, victim));
     e.remove(victim, [&](const pdt::OpResult& r) { removal_done.store(r.error ? 2 : 1); });
     for (const auto& p : more) e.insert(p, errors.callback());
     // Wait (at most 20 s) until the contention manager has put someone to sleep.
@@ -802,7 +722,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
     while (e.stats().total().sleeps == 0 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
     slept = e.stats().total().sleeps > 0;
     removed_while_held = removal_done.load() != 0;
-    t.impl().release_all(holder);
+    pdt::detail::impl_of(t).release_all(holder);
     e.drain();
     st = e.stats();
   });
@@ -1232,7 +1152,7 @@ TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots",
       e.drain();
       errors.require_none();
     });
-    const std::size_t slots = t.impl().grid.slot_count;
+    const std::size_t slots = pdt::detail::impl_of(t).grid.slot_count;
     INFO("cap " << cap << ", slots " << slots << ", points " << pts.size());
     // Regrown as ids double, at about two vertices per slot: between n/8 and n/2.
     if (cap >= pts.size()) {
@@ -1251,33 +1171,40 @@ TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots",
 // 5. Options
 // =============================================================================
 TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "[engine]") {
-  for (const char* n : {"PDT_THREADS", "PDT_BLOCKS_PER_AXIS", "PDT_CONTENTION_LOW", "PDT_CONTENTION_HIGH",
+  for (const char* n : {"PDT_WORKERS", "PDT_THREADS", "PDT_BLOCKS_PER_AXIS", "PDT_CONTENTION_LOW", "PDT_CONTENTION_HIGH",
                         "PDT_CONTENTION_WINDOW", "PDT_GRID_SLOTS"})
     ::unsetenv(n);
   SECTION("unset: the defaults given") {
     pdt::EngineOptions d;
-    d.threads = 7;
+    d.workers = 7;
     d.contention_window = 5;
     const pdt::EngineOptions o = pdt::EngineOptions::from_environment(d);
-    REQUIRE(o.threads == 7);
+    REQUIRE(o.workers == 7);
     REQUIRE(o.contention_window == 5);
     REQUIRE(o.blocks_per_axis == 0);
     REQUIRE(o.contention_low == 0.7);
     REQUIRE(o.contention_high == 0.9);
     REQUIRE(o.grid_slots == (std::size_t{1} << 23));
     const pdt::EngineOptions plain = pdt::EngineOptions::from_environment();
-    REQUIRE(plain.threads == 0);
+    REQUIRE(plain.workers == 0);
+  }
+  SECTION("PDT_THREADS, the 0.1 name of PDT_WORKERS, still counts; PDT_WORKERS wins") {
+    EnvGuard env;
+    env.set("PDT_THREADS", "3");
+    REQUIRE(pdt::EngineOptions::from_environment().workers == 3);
+    env.set("PDT_WORKERS", "5");
+    REQUIRE(pdt::EngineOptions::from_environment().workers == 5);
   }
   SECTION("every variable") {
     EnvGuard env;
-    env.set("PDT_THREADS", "6");
+    env.set("PDT_WORKERS", "6");
     env.set("PDT_BLOCKS_PER_AXIS", "5");
     env.set("PDT_CONTENTION_LOW", "0.25");
     env.set("PDT_CONTENTION_HIGH", "0.5");
     env.set("PDT_CONTENTION_WINDOW", "64");
     env.set("PDT_GRID_SLOTS", "4096");
     const pdt::EngineOptions o = pdt::EngineOptions::from_environment();
-    REQUIRE(o.threads == 6);
+    REQUIRE(o.workers == 6);
     REQUIRE(o.blocks_per_axis == 5);
     REQUIRE(o.contention_low == 0.25);
     REQUIRE(o.contention_high == 0.5);
@@ -1288,7 +1215,7 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     tbb::task_arena arena(2);
     arena.execute([&] {
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}});  // default argument: from_environment()
-      REQUIRE(e.threads() == 6);
+      REQUIRE(e.workers() == 6);
       REQUIRE(e.blocks_per_axis() == 5);
       REQUIRE(e.options().contention_low == 0.25);
       REQUIRE(e.options().contention_window == 64);
@@ -1345,9 +1272,9 @@ TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
       pdt::EngineOptions oo = options_with(threads);
       oo.blocks_per_axis = blocks;
       pdt::Engine e(t, unit, oo);
-      REQUIRE(e.threads() == threads);
+      REQUIRE(e.workers() == threads);
       REQUIRE(e.blocks_per_axis() == want_blocks);
-      REQUIRE(e.options().threads == threads);
+      REQUIRE(e.options().workers == threads);
       REQUIRE(e.stats().workers.size() == threads);
     }
   });

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/cgal_reference.hpp"
+#include "common/point_sets.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
@@ -20,18 +21,6 @@ using namespace pdt_test;
 using pdt::Point3;
 
 namespace {
-
-std::vector<Point3> generated_points(pdt::Distribution dist, std::uint64_t n, std::uint64_t seed) {
-  pdt::GenerateOptions o;
-  o.dist = dist;
-  o.points = n;
-  o.seed = seed;
-  pdt::OpStream s = pdt::generate(o);
-  std::vector<Point3> pts;
-  for (const auto& op : s.ops)
-    if (op.kind == pdt::Operation::Kind::insert) pts.push_back(op.point);
-  return pts;
-}
 
 // Builds a triangulation of `order` (inserted in that order), checks it
 // against the reference computed for `pts` (same points, any order) and
@@ -71,24 +60,6 @@ void check_orders(const std::vector<Point3>& pts, int orders, std::uint64_t seed
     else
       REQUIRE((got == first));
   }
-}
-
-std::vector<Point3> lattice(int n) {
-  std::vector<Point3> pts;
-  for (int x = 0; x < n; ++x)
-    for (int y = 0; y < n; ++y)
-      for (int z = 0; z < n; ++z) pts.push_back({double(x), double(y), double(z)});
-  return pts;
-}
-
-std::vector<Point3> cospherical(int r2) {
-  std::vector<Point3> pts;
-  const int r = static_cast<int>(std::sqrt(double(r2))) + 1;
-  for (int x = -r; x <= r; ++x)
-    for (int y = -r; y <= r; ++y)
-      for (int z = -r; z <= r; ++z)
-        if (x * x + y * y + z * z == r2) pts.push_back({double(x), double(y), double(z)});
-  return pts;
 }
 
 std::vector<Point3> read_or_empty(const std::string& rel, std::size_t max_points = 0) {

@@ -86,7 +86,7 @@ TEST_CASE("validate accepts good triangulations", "[validate]") {
 TEST_CASE("validate detects a wrongly oriented cell", "[validate]") {
   pdt::Triangulation t = random_triangulation(200, 2);
   require_valid(t);
-  auto& cells = t.impl().cells;
+  auto& cells = pdt::detail::impl_of(t).cells;
   SECTION("finite cell: two vertices swapped") {
     pdt::CellId c = first_cell(t, true);
     REQUIRE(c != pdt::no_cell);
@@ -116,7 +116,7 @@ TEST_CASE("validate detects a wrongly oriented cell", "[validate]") {
 
 TEST_CASE("validate detects broken adjacency", "[validate]") {
   pdt::Triangulation t = random_triangulation(200, 3);
-  auto& cells = t.impl().cells;
+  auto& cells = pdt::detail::impl_of(t).cells;
   int i = -1;
   pdt::CellId c = interior_facet_cell(t, &i);
   REQUIRE(c != pdt::no_cell);
@@ -169,7 +169,7 @@ TEST_CASE("validate detects broken adjacency", "[validate]") {
 
 TEST_CASE("validate detects a wrong vertex-to-cell link", "[validate]") {
   pdt::Triangulation t = random_triangulation(200, 4);
-  auto& verts = t.impl().verts;
+  auto& verts = pdt::detail::impl_of(t).verts;
   const pdt::VertexId v = t.vertices()[7];
   const pdt::CellId saved = verts[v].cell;
   REQUIRE(cell_has(t, saved, v));
@@ -213,10 +213,10 @@ TEST_CASE("validate detects a facet that is not locally Delaunay", "[validate]")
     // Moved to (0.3, 0.3, -0.01): still below the base (every orientation and
     // the convexity of the hull are unchanged) but at squared distance 0.17 from
     // the centre: inside sphere(abcd). Only the Delaunay property fails.
-    t.impl().verts[e].p = KPoint(0.3, 0.3, -0.01);
+    pdt::detail::impl_of(t).verts[e].p = KPoint(0.3, 0.3, -0.01);
     REQUIRE(all_positively_oriented(t));
     require_invalid(t);
-    t.impl().verts[e].p = KPoint(0.3, 0.3, -1);
+    pdt::detail::impl_of(t).verts[e].p = KPoint(0.3, 0.3, -1);
     require_valid(t);
   }
   SECTION("random triangulation: a vertex moved next to an opposite facet") {
@@ -239,9 +239,9 @@ TEST_CASE("validate detects a facet that is not locally Delaunay", "[validate]")
       }
     const Point3 old = t.point(w);
     const double s = 1e-3;
-    t.impl().verts[w].p = KPoint(g.x + s * (old.x - g.x), g.y + s * (old.y - g.y), g.z + s * (old.z - g.z));
+    pdt::detail::impl_of(t).verts[w].p = KPoint(g.x + s * (old.x - g.x), g.y + s * (old.y - g.y), g.z + s * (old.z - g.z));
     require_invalid(t);
-    t.impl().verts[w].p = KPoint(old.x, old.y, old.z);
+    pdt::detail::impl_of(t).verts[w].p = KPoint(old.x, old.y, old.z);
     require_valid(t);
   }
   SECTION("lattice: a vertex moved onto another vertex") {
@@ -252,7 +252,7 @@ TEST_CASE("validate detects a facet that is not locally Delaunay", "[validate]")
     require_valid(t);
     const pdt::VertexId v = t.locate({1, 1, 1}).vertex;
     REQUIRE(t.is_vertex(v));
-    t.impl().verts[v].p = KPoint(1, 1, 2);
+    pdt::detail::impl_of(t).verts[v].p = KPoint(1, 1, 2);
     require_invalid(t);
   }
 }
@@ -266,12 +266,12 @@ TEST_CASE("validate checks lower-dimensional states", "[validate]") {
   require_valid(t);
   SECTION("a vertex moved off the plane") {
     const pdt::VertexId v = t.vertices()[12];
-    t.impl().verts[v].p = KPoint(2, 2, 1);
+    pdt::detail::impl_of(t).verts[v].p = KPoint(2, 2, 1);
     require_invalid(t);
   }
   SECTION("a live vertex with multiplicity 0") {
     const pdt::VertexId v = t.vertices()[3];
-    t.impl().verts[v].multiplicity = 0;
+    pdt::detail::impl_of(t).verts[v].multiplicity = 0;
     require_invalid(t);
   }
 }

@@ -21,15 +21,16 @@
 #include <thread>
 #include <vector>
 
-#include "io_util.hpp"
 #include "pdt/pdt.hpp"
-#include "sys_info.hpp"
+#include "support/cli_text.hpp"
+#include "support/sys_info.hpp"
 
 namespace {
 
-using pdt::detail::format_count;
-using pdt::detail::format_megabytes;
-using pdt::detail::format_seconds;
+using pdt::support::ends_with_nocase;
+using pdt::support::format_count;
+using pdt::support::format_megabytes;
+using pdt::support::format_seconds;
 
 // ---- usage -------------------------------------------------------------------
 
@@ -129,37 +130,22 @@ class Args {
 
 // A non-negative integer option value: "1000000", or "1e6" when integral.
 std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v) {
-  std::uint64_t n = 0;
-  if (pdt::detail::parse_u64(v, n) == pdt::detail::NumStatus::ok) return n;
-  double d = 0;
-  if (pdt::detail::parse_double(v, d) == pdt::detail::NumStatus::ok && d >= 0 && d <= 9007199254740992.0 &&
-      d == static_cast<double>(static_cast<std::uint64_t>(d)))
-    return static_cast<std::uint64_t>(d);
+  unsigned long long n = 0;
+  if (pdt::support::parse_count(v, n)) return n;
   usage_error(args.usage(), std::string(name) + " '" + v + "': expected a non-negative integer");
 }
 
 double parse_real_option(const Args& args, const char* name, const std::string& v) {
   double d = 0;
-  if (pdt::detail::parse_double(v, d) != pdt::detail::NumStatus::ok)
+  if (!pdt::support::parse_real(v, d))
     usage_error(args.usage(), std::string(name) + " '" + v + "': expected a number");
   return d;
 }
 
 std::string box_string(const pdt::Box& b) {
-  std::string s = "[";
-  pdt::detail::append_double(s, b.lo.x);
-  s += ", ";
-  pdt::detail::append_double(s, b.hi.x);
-  s += "] x [";
-  pdt::detail::append_double(s, b.lo.y);
-  s += ", ";
-  pdt::detail::append_double(s, b.hi.y);
-  s += "] x [";
-  pdt::detail::append_double(s, b.lo.z);
-  s += ", ";
-  pdt::detail::append_double(s, b.hi.z);
-  s += "]";
-  return s;
+  using pdt::support::format_double;
+  return "[" + format_double(b.lo.x) + ", " + format_double(b.hi.x) + "] x [" + format_double(b.lo.y) + ", " +
+         format_double(b.hi.y) + "] x [" + format_double(b.lo.z) + ", " + format_double(b.hi.z) + "]";
 }
 
 void row(const char* key, const std::string& value) { std::printf("%-16s %s\n", key, value.c_str()); }
@@ -205,7 +191,7 @@ int cmd_gen(Args args) {
   }
   if (!have_points) usage_error(kGenUsage, "gen needs --points N");
   if (!out || out->empty()) usage_error(kGenUsage, "gen needs --out FILE");
-  pdt::detail::Stopwatch sw;
+  pdt::support::Stopwatch sw;
   const pdt::OpStream s = pdt::generate(o);
   pdt::write_ops(*out, s);
   std::printf("wrote %s: %s insertions, %s removals (%s, seed %llu), box %s, in %s\n", out->c_str(),
@@ -270,14 +256,14 @@ ReplayStats replay_engine(const pdt::OpStream& s, unsigned threads, pdt::Triangu
     if (r.remove == pdt::RemoveResult::multiplicity_lowered) lowered.fetch_add(1, std::memory_order_relaxed);
   };
   pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
-  opts.threads = threads;
+  opts.workers = threads;
   // Workers are coroutines, not threads: N workers run in an arena no wider
   // than the machine, so --threads 16 on 2 cores still exercises 16 workers.
   tbb::task_arena arena(static_cast<int>(std::min(threads, std::max(1u, std::thread::hardware_concurrency()))));
-  pdt::detail::ProgressBar bar("replaying", s.ops.size());
+  pdt::support::ProgressBar bar("replaying", s.ops.size());
   arena.execute([&] {
     pdt::Engine engine(t, stream_box(s), opts);
-    pdt::detail::Stopwatch phase;
+    pdt::support::Stopwatch phase;
     std::optional<Kind> current;
     auto close_phase = [&] {
       if (!current) return;
@@ -301,7 +287,7 @@ ReplayStats replay_engine(const pdt::OpStream& s, unsigned threads, pdt::Triangu
     }
     close_phase();
     st.engine_stats = engine.stats();
-    st.threads_used = engine.threads();
+    st.threads_used = engine.workers();
     st.blocks_per_axis = engine.blocks_per_axis();
   });
   bar.finish();
@@ -322,8 +308,8 @@ ReplayStats replay(const pdt::OpStream& s, pdt::Triangulation& t) {
   ReplayStats st;
   std::vector<pdt::VertexId> vertex_of;
   vertex_of.reserve(s.insert_count());
-  pdt::detail::ProgressBar bar("replaying", s.ops.size());
-  pdt::detail::Stopwatch ins, rem;
+  pdt::support::ProgressBar bar("replaying", s.ops.size());
+  pdt::support::Stopwatch ins, rem;
   ins.stop();
   rem.stop();
   using Kind = pdt::Operation::Kind;
@@ -363,7 +349,6 @@ ReplayStats replay(const pdt::OpStream& s, pdt::Triangulation& t) {
 }
 
 bool is_point_file(const std::string& p) {
-  using pdt::detail::ends_with_nocase;
   for (const char* ext : {".xyz", ".xyz.gz", ".ply", ".off", ".node", ".smesh"})
     if (ends_with_nocase(p, ext)) return true;
   return false;
@@ -397,14 +382,13 @@ int cmd_run(Args args) {
   if (!input) usage_error(kRunUsage, "run needs an input file");
   enum class OutKind { none, tetgen, vtu } out_kind = OutKind::none;
   if (out) {
-    using pdt::detail::ends_with_nocase;
     // Decide before the (possibly long) run, so a typo cannot waste it.
     if (ends_with_nocase(*out, ".node") || ends_with_nocase(*out, ".ele")) out_kind = OutKind::tetgen;
     else if (ends_with_nocase(*out, ".vtu")) out_kind = OutKind::vtu;
     else usage_error(kRunUsage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
   }
 
-  pdt::detail::Stopwatch read_sw;
+  pdt::support::Stopwatch read_sw;
   pdt::OpStream s;
   if (is_point_file(*input)) {
     const std::vector<pdt::Point3> pts = pdt::read_points(*input);
@@ -438,7 +422,7 @@ int cmd_run(Args args) {
   const double total = st.insert_seconds + st.remove_seconds + st.mixed_seconds;
   row("operations/s", total > 0 ? format_count(static_cast<std::uint64_t>(static_cast<double>(s.ops.size()) / total))
                                 : std::string("n/a"));
-  row("peak memory", format_megabytes(pdt::detail::peak_rss_bytes()));
+  row("peak memory", format_megabytes(pdt::support::peak_rss_bytes()));
   if (st.engine) {
     const pdt::WorkerStats w = st.engine_stats.total();
     char buf[256];
@@ -454,7 +438,7 @@ int cmd_run(Args args) {
 
   int status = 0;
   if (validate) {
-    pdt::detail::Stopwatch vsw;
+    pdt::support::Stopwatch vsw;
     std::string why;
     const bool ok = t.validate(&why);
     row("validate", (ok ? std::string("ok") : "FAILED: " + why) + " (" + format_seconds(vsw.seconds()) + ")");

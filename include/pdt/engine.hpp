@@ -1,5 +1,5 @@
 #pragma once
-// pdt::Engine: many threads carrying out a live stream of insertions and
+// pdt::Engine: many workers carrying out a live stream of insertions and
 // removals on one Triangulation (Foteinos & Chrisochoides, §3).
 //
 // Model. The engine is given the domain box up front; the box is split into
@@ -14,7 +14,7 @@
 // contention_low the worker suspends (releasing everything), above
 // contention_high it wakes a sleeper; at least one worker always runs, so the
 // engine cannot livelock. Because ties are broken by symbolic perturbation the
-// final triangulation does not depend on the thread count or the interleaving.
+// final triangulation does not depend on the worker count or the interleaving.
 //
 // Any thread may submit while the engine runs. Results come back three ways:
 //   co_await engine.insert(p)            (C++20 coroutine; resumes as a TBB task)
@@ -33,30 +33,11 @@
 
 #include <oneapi/tbb/task_arena.h>
 
-#include "pdt/ops.hpp"
+#include "pdt/engine_options.hpp"
+#include "pdt/geometry.hpp"
 #include "pdt/triangulation.hpp"
 
 namespace pdt {
-
-// Every field is mirrored by an environment variable, read by from_environment().
-struct EngineOptions {
-  unsigned threads = 0;             // PDT_THREADS: workers; 0 = the arena's concurrency
-  unsigned blocks_per_axis = 0;     // PDT_BLOCKS_PER_AXIS: 0 = smallest b with b^3 >= 4 * threads
-  double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
-  double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
-  unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
-  std::size_t grid_slots = 1u << 23;  // PDT_GRID_SLOTS: most slots of the jump-and-walk grid, which
-                                      // grows with the vertex count (about 2 vertices per slot)
-
-  // Starts from `defaults` and overrides each field whose variable is set.
-  // Throws pdt::Error(invalid_argument) naming the variable for a bad value.
-  static EngineOptions from_environment(EngineOptions defaults);
-  static EngineOptions from_environment();
-};
-
-// The per-thread pool allocator this build uses for cells and vertices:
-// "pool" (pdt's chunked pool) or "mimalloc" (CMake option PDT_ALLOCATOR).
-const char* allocator_name();
 
 struct WorkerStats {
   std::uint64_t completed = 0;  // operations done
@@ -74,8 +55,16 @@ struct EngineStats {
   WorkerStats total() const;            // sums; max ratio is the max over workers
 };
 
+// Which kind of operation an OpResult reports.
+enum class OpKind : std::uint8_t {
+  insert,            // insert(p), insert_batch
+  remove,            // remove(v)
+  remove_insertion,  // remove_insertion(t), remove_insertions
+};
+
 // The outcome of one operation.
 struct OpResult {
+  OpKind kind = OpKind::insert;
   InsertResult insert;                               // for insertions
   RemoveResult remove = RemoveResult::removed;       // for removals
   std::exception_ptr error;                          // a pdt::Error if the operation failed
@@ -164,7 +153,8 @@ class Engine {
   // there it would wait for itself.
   void drain();
   EngineStats stats() const;
-  unsigned threads() const;
+  unsigned workers() const;
+  [[deprecated("use workers()")]] unsigned threads() const { return workers(); }
   unsigned blocks_per_axis() const;
   const EngineOptions& options() const;
 

@@ -4,7 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 #include "pdt/triangulation.hpp"
 
 namespace pdt {

@@ -17,16 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 
 namespace pdt {
-
-struct Box {
-  Point3 lo, hi;
-  bool contains(const Point3& p) const {
-    return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
-  }
-};
 
 struct Operation {
   enum class Kind : std::uint8_t { insert, remove } kind = Kind::insert;

@@ -3,7 +3,7 @@
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
+#include "pdt/geometry.hpp"
 #include "pdt/io.hpp"
 #include "pdt/ops.hpp"
-#include "pdt/point.hpp"
 #include "pdt/triangulation.hpp"

@@ -34,9 +34,13 @@
 #include <string>
 #include <vector>
 
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 
 namespace pdt {
+
+namespace detail {
+struct ImplAccess;
+}
 
 using VertexId = std::uint32_t;
 using CellId = std::uint32_t;
@@ -78,6 +82,16 @@ struct TriangulationStats {
   std::uint64_t cells_created_by_remove = 0;  // cells sewn into holes
   std::uint64_t cells_touched_by_remove = 0;  // hole cells + small-triangulation cells built
   std::uint64_t walk_steps = 0;        // visibility-walk steps over all locations
+  TriangulationStats& operator+=(const TriangulationStats& o) {
+    insertions += o.insertions;
+    duplicates += o.duplicates;
+    removals += o.removals;
+    cells_created_by_insert += o.cells_created_by_insert;
+    cells_created_by_remove += o.cells_created_by_remove;
+    cells_touched_by_remove += o.cells_touched_by_remove;
+    walk_steps += o.walk_steps;
+    return *this;
+  }
 };
 
 class Triangulation {
@@ -135,12 +149,10 @@ class Triangulation {
   const TriangulationStats& stats() const;
   std::size_t memory_bytes() const;  // bytes held by cell and vertex storage
 
-  // Implementation access for pdt's own engine and tests (lib/triangulation_impl.hpp).
-  struct Impl;
-  Impl& impl() { return *impl_; }
-  const Impl& impl() const { return *impl_; }
+  struct Impl;  // lib/triangulation_impl.hpp
 
  private:
+  friend struct detail::ImplAccess;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -28,7 +28,7 @@
 #include <catch2/catch.hpp>
 
 #include "pdt/error.hpp"
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 #include "pdt/triangulation.hpp"
 
 #ifndef PDT_SHARED_DATA

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "pdt/error.hpp"
-#include "pdt/point.hpp"
+#include "pdt/geometry.hpp"
 
 namespace pdt_test {
 

@@ -1,12 +1,12 @@
 #pragma once
-// Internal: process memory, timing and a terminal progress line for the tool
+// Tool support (not part of libpdt): process memory, timing and a terminal progress line for the tool
 // and the benchmarks. Linux-specific where it must be (/proc); elsewhere the
 // memory figures are 0.
 #include <chrono>
 #include <cstdint>
 #include <string>
 
-namespace pdt::detail {
+namespace pdt::support {
 
 // Peak resident set size of this process (VmHWM), in bytes; 0 if unknown.
 std::uint64_t peak_rss_bytes();
@@ -73,4 +73,4 @@ std::string format_seconds(double s);
 std::string format_megabytes(std::uint64_t bytes);
 std::string format_count(std::uint64_t n);
 
-}  // namespace pdt::detail
+}  // namespace pdt::support

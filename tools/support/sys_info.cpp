@@ -1,4 +1,4 @@
-// Internal: see sys_info.hpp.
+// Tool support: see sys_info.hpp.
 #include "sys_info.hpp"
 
 #include <unistd.h>
@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <cstring>
 
-namespace pdt::detail {
+namespace pdt::support {
 
 namespace {
 
@@ -97,4 +97,4 @@ std::string format_count(std::uint64_t n) {
   return out;
 }
 
-}  // namespace pdt::detail
+}  // namespace pdt::support

@@ -1,0 +1,34 @@
+#pragma once
+// pdt::EngineOptions: how an Engine splits its work. Every field is mirrored by
+// an environment variable, read by EngineOptions::from_environment().
+#include <cstddef>
+
+namespace pdt {
+
+struct EngineOptions {
+  // PDT_WORKERS: the engine's workers, 0 = the arena's concurrency. Workers are
+  // C++20 coroutines run as oneTBB tasks, not threads: how many threads run
+  // them is the task_arena's business (its concurrency), so 16 workers in an
+  // arena of 2 threads is fine (and tests every interleaving the locks allow).
+  unsigned workers = 0;
+  unsigned blocks_per_axis = 0;     // PDT_BLOCKS_PER_AXIS: 0 = smallest b with b^3 >= 4 * workers
+  double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
+  double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
+  unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
+  std::size_t grid_slots = 1u << 23;  // PDT_GRID_SLOTS: most slots of the jump-and-walk grid, which
+                                      // grows with the vertex count (about 2 vertices per slot)
+  // Deprecated: the name of `workers` in pdt 0.1 (it counts workers, not
+  // threads); used only when workers is 0. PDT_THREADS is read into workers.
+  unsigned threads = 0;
+
+  // Starts from `defaults` and overrides each field whose variable is set.
+  // Throws pdt::Error(invalid_argument) naming the variable for a bad value.
+  static EngineOptions from_environment(EngineOptions defaults);
+  static EngineOptions from_environment();
+};
+
+// The per-thread pool allocator this build uses for cells and vertices:
+// "pool" (pdt's chunked pool) or "mimalloc" (CMake option PDT_ALLOCATOR).
+const char* allocator_name();
+
+}  // namespace pdt

@@ -1,0 +1,36 @@
+#pragma once
+// A box cut into res^3 equal cells: which cell holds a coordinate. The one
+// place pdt scales coordinates to a box (the jump grid's slots, the engine's
+// blocks, the Morton order of a first build).
+//
+// Everything is computed on halves (0.5 * c - 0.5 * lo), so no difference
+// overflows even for boxes reaching +-DBL_MAX. A coordinate outside the box,
+// or NaN, lands in the nearest end cell; a flat axis (lo == hi, or an extent
+// too small to scale) maps everything to cell 0.
+#include <cmath>
+
+namespace pdt::detail {
+
+struct BoxLattice {
+  double half_lo[3] = {0, 0, 0};
+  double scale[3] = {0, 0, 0};  // res / half extent; 0 for a flat axis
+  int res = 1;
+
+  BoxLattice() = default;
+  BoxLattice(const double lo[3], const double hi[3], int cells_per_axis) : res(cells_per_axis < 1 ? 1 : cells_per_axis) {
+    for (int a = 0; a < 3; ++a) {
+      half_lo[a] = 0.5 * lo[a];
+      const double half_extent = 0.5 * hi[a] - 0.5 * lo[a];
+      const double s = half_extent > 0 ? res / half_extent : 0.0;
+      scale[a] = std::isfinite(s) ? s : 0.0;
+    }
+  }
+
+  // The cell along axis a that holds coordinate c, in [0, res).
+  int index(int a, double c) const {
+    const double t = (0.5 * c - half_lo[a]) * scale[a];
+    return !(t > 0) ? 0 : t >= res - 1 ? res - 1 : static_cast<int>(t);
+  }
+};
+
+}  // namespace pdt::detail

@@ -1,0 +1,65 @@
+// EngineOptions from the environment, the allocator's name, summed statistics.
+#include <cmath>
+#include <cstdlib>
+#include <string>
+#include <type_traits>
+
+#include "pdt/engine.hpp"
+#include "pdt/error.hpp"
+
+namespace pdt {
+
+namespace {
+
+template <class T>
+bool env_number(const char* name, T& field) {
+  const char* s = std::getenv(name);
+  if (!s || !*s) return false;
+  char* end = nullptr;
+  double v = std::strtod(s, &end);
+  bool ok = end && *end == '\0' && std::isfinite(v) && v >= 0;
+  if constexpr (std::is_integral_v<T>) ok = ok && v == std::floor(v) && v <= 1e12;
+  if (!ok)
+    throw Error(ErrorCode::invalid_argument,
+                std::string(name) + "='" + s + "' is not a valid value (expected a non-negative number)");
+  field = static_cast<T>(v);
+  return true;
+}
+
+}  // namespace
+
+EngineOptions EngineOptions::from_environment(EngineOptions o) {
+  if (!env_number("PDT_WORKERS", o.workers)) env_number("PDT_THREADS", o.workers);  // PDT_THREADS: the 0.1 name
+  env_number("PDT_BLOCKS_PER_AXIS", o.blocks_per_axis);
+  env_number("PDT_CONTENTION_LOW", o.contention_low);
+  env_number("PDT_CONTENTION_HIGH", o.contention_high);
+  env_number("PDT_CONTENTION_WINDOW", o.contention_window);
+  env_number("PDT_GRID_SLOTS", o.grid_slots);
+  return o;
+}
+
+EngineOptions EngineOptions::from_environment() { return from_environment(EngineOptions{}); }
+
+const char* allocator_name() {
+#ifdef PDT_USE_MIMALLOC
+  return "mimalloc";
+#else
+  return "pool";
+#endif
+}
+
+WorkerStats EngineStats::total() const {
+  WorkerStats t;
+  for (const WorkerStats& w : workers) {
+    t.completed += w.completed;
+    t.attempts += w.attempts;
+    t.rollbacks += w.rollbacks;
+    t.deferred += w.deferred;
+    t.sleeps += w.sleeps;
+    t.seconds_asleep += w.seconds_asleep;
+    t.max_rollbacks_per_completed = std::max(t.max_rollbacks_per_completed, w.max_rollbacks_per_completed);
+  }
+  return t;
+}
+
+}  // namespace pdt

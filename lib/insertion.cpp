@@ -1,0 +1,158 @@
+// Insertion (paper §2.1): Bowyer-Watson. Locate p, gather the conflict zone
+// (the cells whose perturbed circumsphere holds p), and replace it by the cone
+// from the new vertex over the zone's boundary.
+#include <cstring>
+
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+using detail::CellRec;
+using detail::KPoint;
+using detail::OpContext;
+using detail::OpStatus;
+
+namespace {
+
+std::uint64_t edge_key(VertexId a, VertexId b) {
+  if (a > b) std::swap(a, b);
+  return (std::uint64_t{a} << 32) | b;
+}
+
+}  // namespace
+
+OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out) {
+  if (dim.load(std::memory_order_acquire) < 3) {
+    if (ctx.locking) return OpStatus::needs_global;
+    out.result = insert_flat(ctx, p);
+    out.stamp = verts[out.result.vertex].stamp.load(std::memory_order_relaxed);
+    ++ctx.stats.insertions;
+    fold_counters(ctx);
+    return OpStatus::done;
+  }
+  auto rollback = [&] {
+    release_all(ctx);
+    return OpStatus::rollback;
+  };
+  VertexId s = start_vertex(ctx, p, hint);
+  if (s == no_vertex) return rollback();
+  // Hold s's cell (stable: it contains s, which we hold), then walk.
+  CellId c = verts[s].cell;
+  for (int i = 0; i < 4; ++i)
+    if (!lock_shared(ctx, cells[c].v[i])) return rollback();
+  if (int k = index_of(c, 0); k >= 0) {
+    std::uint32_t nw = cells[c].n[k];
+    c = nw >> 2;
+    if (!lock_shared(ctx, cells[c].v[nw & 3])) return rollback();
+  }
+  bool outside = false;
+  c = walk(ctx, p, c, &outside);
+  if (c == no_cell) return rollback();
+  if (!outside) {
+    const CellRec& cr = cells[c];
+    for (int i = 0; i < 4; ++i) {
+      VertexId w = cr.v[i];
+      if (w != 0 && pt(w) == p) {
+        if (!lock_exclusive(ctx, w)) return rollback();
+        ++verts[w].multiplicity;
+        out.stamp = verts[w].stamp.load(std::memory_order_relaxed);
+        ++ctx.stats.duplicates;
+        ++ctx.stats.insertions;
+        release_all(ctx);
+        out.result = {w, false};
+        return OpStatus::done;
+      }
+    }
+  }
+  if (!lock_cell_exclusive(ctx, c)) return rollback();
+  if (gather_conflict_zone(ctx, p, c) != OpStatus::done) return rollback();
+  VertexId v = alloc_vertex(ctx, p);
+  out.stamp = verts[v].stamp.load(std::memory_order_relaxed);
+  cone_from_vertex(ctx, v);
+  grid_note(ctx, v);
+  // A start for contexts that know no vertex yet; refreshed rarely (shared line).
+  if ((ctx.vertex_counter & 63) == 1) recent_vertex.store(v, std::memory_order_relaxed);
+  ++ctx.stats.insertions;
+  release_all(ctx);
+  end_op_counters(ctx);
+  out.result = {v, true};
+  return OpStatus::done;
+}
+
+OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0) {
+  // Bowyer-Watson: the cells whose (perturbed) circumsphere contains p form a
+  // connected, star-shaped conflict zone; search it breadth first. c0 is held
+  // exclusively; each cell joining the zone is locked exclusively before
+  // its own neighbours are read.
+  const std::uint64_t in = ctx.next_stamp(), out = in + 1;
+  std::vector<CellId>& zone = ctx.conflict_zone;
+  zone.clear();
+  ctx.boundary.clear();
+  marks[c0] = in;
+  zone.push_back(c0);
+  for (std::size_t idx = 0; idx < zone.size(); ++idx) {
+    CellId c = zone[idx];
+    for (int i = 0; i < 4; ++i) {
+      std::uint32_t nw = cells[c].n[i];
+      CellId nb = nw >> 2;
+      std::uint64_t m = marks[nb];
+      if (m == in) continue;
+      if (m != out) {
+        if (in_conflict(nb, p)) {
+          if (!lock_exclusive(ctx, cells[nb].v[nw & 3])) return OpStatus::rollback;
+          marks[nb] = in;
+          zone.push_back(nb);
+          continue;
+        }
+        marks[nb] = out;
+      }
+      OpContext::BoundaryFacet bf;
+      std::memcpy(bf.v, cells[c].v, sizeof bf.v);
+      bf.outer = nw;
+      bf.facet = i;
+      ctx.boundary.push_back(bf);
+    }
+  }
+  return OpStatus::done;
+}
+
+void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
+  // Replace the conflict zone by the cone from v over its boundary. Its cells
+  // are recycled first so the new cells reuse their memory.
+  for (CellId c : ctx.conflict_zone) {
+    if (!cell_infinite(c)) --ctx.d_finite_cells;
+    free_cell(ctx, c);
+  }
+  detail::IdMap& edges = ctx.new_cell_by_edge;
+  edges.reserve_for(3 * ctx.boundary.size());
+  edges.clear();
+  for (OpContext::BoundaryFacet& bf : ctx.boundary) {
+    bf.v[bf.facet] = v;
+    CellId nc = alloc_cell(ctx);
+    CellRec& r = cells[nc];
+    std::memcpy(r.v, bf.v, sizeof r.v);
+    set_adjacency(nc, bf.facet, bf.outer >> 2, static_cast<int>(bf.outer & 3));
+    bool finite = true;
+    for (int k = 0; k < 4; ++k) {
+      if (r.v[k] == 0) finite = false;
+      set_vertex_cell(r.v[k], nc);
+    }
+    if (finite) ++ctx.d_finite_cells;
+    // The three facets through v: each is identified by the zone-boundary
+    // edge it contains; the two new cells on that edge are neighbours.
+    for (int k = 0; k < 4; ++k) {
+      if (k == bf.facet) continue;
+      int a = -1, b = -1;
+      for (int t = 0; t < 4; ++t) {
+        if (t == k || t == bf.facet) continue;
+        (a < 0 ? a : b) = t;
+      }
+      bool inserted = false;
+      std::uint32_t val = edges.get_or_insert(edge_key(r.v[a], r.v[b]), 4 * nc + static_cast<std::uint32_t>(k), &inserted);
+      if (!inserted) set_adjacency(nc, k, val >> 2, static_cast<int>(val & 3));
+    }
+  }
+  ctx.stats.cells_created_by_insert += ctx.boundary.size();
+}
+
+}  // namespace pdt

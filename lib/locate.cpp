@@ -1,0 +1,135 @@
+// Location (paper §2.1): where a walk starts (a hint, the jump grid, the
+// context's last vertex, random probes) and the visibility walk itself; and the
+// conflict test both insertion and validation use.
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+using detail::CellRec;
+using detail::KPoint;
+using detail::OpContext;
+using detail::orient;
+using detail::perturbed_incircle;
+using detail::perturbed_insphere;
+
+CellId Triangulation::Impl::finite_cell_of(VertexId v) const {
+  CellId c = verts[v].cell;
+  int k = index_of(c, 0);
+  if (k >= 0) c = cells[c].n[k] >> 2;  // across the hull facet: finite
+  return c;
+}
+
+VertexId Triangulation::Impl::start_vertex(OpContext& ctx, const KPoint& p, VertexId hint) const {
+  auto usable = [&](VertexId v) {
+    return v != no_vertex && v != 0 && v < verts.size() && const_cast<Impl*>(this)->lock_shared(ctx, v) &&
+           verts[v].multiplicity > 0;
+  };
+  if (usable(hint)) return hint;
+  if (grid.slot_count) {
+    VertexId v = grid.lookup(p);
+    if (usable(v)) return v;
+  }
+  if (usable(ctx.last_vertex)) return ctx.last_vertex;
+  // Jump (Mücke et al.): random vertex ids; keep the nearest live one seen.
+  const std::size_t bound = verts.size();
+  VertexId best = no_vertex;
+  for (int probe = 0; probe < 24 && bound > 1; ++probe) {
+    auto v = static_cast<VertexId>(1 + ctx.next_random() % (bound - 1));
+    if (!usable(v)) continue;
+    if (best == no_vertex || CGAL::compare_distance_to_point(p, pt(v), pt(best)) == CGAL::SMALLER) best = v;
+  }
+  if (best == no_vertex) {
+    // One load: the vertex checked (and locked) must be the one returned.
+    const VertexId recent = recent_vertex.load(std::memory_order_relaxed);
+    if (usable(recent)) best = recent;
+  }
+  if (best != no_vertex || ctx.locking) return best;  // the engine retries after a rollback
+  for (VertexId v = 1; v < bound; ++v)
+    if (verts[v].multiplicity > 0) return v;
+  return no_vertex;
+}
+
+CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool* outside) const {
+  // Visibility walk (Devillers, Pion, Teillaud): cross a facet that p is
+  // strictly beyond; the facets are tried from a random one so the walk cannot
+  // cycle. Never stops in a finite cell that p is outside of.
+  Impl& self = *const_cast<Impl*>(this);
+  CellId prev = no_cell;
+  std::uint64_t r = ctx.next_random();
+  while (true) {
+    const CellRec& cr = cells[c];
+    const KPoint* q[4] = {&pt(cr.v[0]), &pt(cr.v[1]), &pt(cr.v[2]), &pt(cr.v[3])};
+    int first = static_cast<int>(r & 3);
+    r = (r >> 2) | (r << 62);
+    CellId next = no_cell;
+    int via = -1;
+    for (int k = 0; k < 4; ++k) {
+      int i = (first + k) & 3;
+      CellId nb = cr.n[i] >> 2;
+      if (nb == prev) continue;
+      const KPoint* a[4] = {q[0], q[1], q[2], q[3]};
+      a[i] = &p;
+      if (orient(*a[0], *a[1], *a[2], *a[3]) < 0) {
+        next = nb;
+        via = i;
+        break;
+      }
+    }
+    if (next == no_cell) {
+      *outside = false;
+      return c;
+    }
+    // The next cell shares a facet with c, which we hold: it is stable; lock
+    // its fourth vertex to hold it.
+    if (!self.lock_shared(ctx, cells[next].v[cr.n[via] & 3])) return no_cell;
+    ++ctx.stats.walk_steps;
+    prev = c;
+    c = next;
+    if (cell_infinite(c)) {
+      *outside = true;
+      return c;
+    }
+  }
+}
+
+bool Triangulation::Impl::in_conflict(CellId c, const KPoint& p) const {
+  const CellRec& cr = cells[c];
+  int k = index_of(c, 0);
+  if (k < 0) return perturbed_insphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p) > 0;
+  // Infinite cell: in conflict when p is beyond its hull facet, or on the
+  // facet's plane and inside its (perturbed) circumcircle. The facet order is
+  // CGAL's, for which orientation(i0, i1, i2, p) has the sign of the cell with
+  // the infinite vertex replaced by p.
+  int i0, i1, i2;
+  if (k & 1) {
+    i0 = (k + 1) & 3, i1 = (k + 2) & 3, i2 = (k + 3) & 3;
+  } else {
+    i0 = (k + 2) & 3, i1 = (k + 1) & 3, i2 = (k + 3) & 3;
+  }
+  const KPoint& a = pt(cr.v[i0]);
+  const KPoint& b = pt(cr.v[i1]);
+  const KPoint& d = pt(cr.v[i2]);
+  int o = orient(a, b, d, p);
+  if (o != 0) return o > 0;
+  return perturbed_incircle(a, b, d, p) > 0;
+}
+
+void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
+  if (is_small) return;
+  // Resize as the vertex count doubles, unless an engine drives the
+  // triangulation: it regrows the grid itself, with the world stopped.
+  if (grid_growth == GridGrowth::kernel &&
+      static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed) + ctx.d_vertices) >= 2 * grid.built_for + 64) {
+    fold_counters(ctx);
+    grid_rebuild();
+    return;
+  }
+  if (grid.slot_count) grid.set(grid.slot_of(pt(v)), v);
+}
+
+void Triangulation::Impl::grid_rebuild(std::size_t slots) {
+  // Built aside and moved in: an allocation failure leaves the old grid.
+  grid = detail::JumpGrid::build(verts, slots);
+}
+
+}  // namespace pdt

@@ -1,0 +1,77 @@
+#pragma once
+// OpContext: everything one thread needs to run kernel operations: its pools,
+// its counters, the locks it holds and its scratch. The sequential
+// triangulation owns one (locking off); the engine gives each worker one.
+// Nothing here is shared between threads.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "id_map.hpp"
+#include "pdt/triangulation.hpp"
+#include "storage.hpp"
+
+namespace pdt::detail {
+
+struct OpContext {
+  OpContext(std::uint32_t id, bool locking);
+  ~OpContext();
+  OpContext(const OpContext&) = delete;
+  OpContext& operator=(const OpContext&) = delete;
+
+  const std::uint32_t id;  // 1..; lock owner id and stamp prefix
+  const bool locking;      // false: single-threaded, every try-lock succeeds
+
+  // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
+  // Invariant: free_cells / free_vertices list ids this context may reuse;
+  // [fresh_cell, fresh_cell_end) are ids of its current chunk never used yet.
+  FreeList free_cells, free_vertices;
+  std::uint32_t fresh_cell = 0, fresh_cell_end = 0;
+  std::uint32_t fresh_vertex = 0, fresh_vertex_end = 0;
+
+  // -- counters (net changes, folded into the Impl's totals by fold_counters) -
+  std::int64_t d_vertices = 0, d_cells = 0, d_finite_cells = 0;
+  TriangulationStats stats;
+  std::uint64_t stamp_counter = 0, vertex_counter = 0;
+  std::uint64_t rng;
+  // The vertex this context touched last: where its next walk starts when
+  // nothing better is known. Kernel-internal; results are returned, not kept here.
+  VertexId last_vertex = no_vertex;
+
+  // -- locks held by the current operation ------------------------------------
+  std::vector<VertexId> held_shared, held_exclusive;
+
+  // -- scratch of one operation ------------------------------------------------
+  // Insertion: the conflict zone (cells whose circumsphere holds the point),
+  // its boundary facets, and the new cells by the boundary edge they contain.
+  struct BoundaryFacet {
+    VertexId v[4];        // the new cell's vertices
+    std::uint32_t outer;  // 4*outer cell + mirror facet
+    int facet;            // index of the boundary facet in the new cell
+  };
+  std::vector<CellId> conflict_zone;
+  std::vector<BoundaryFacet> boundary;
+  IdMap new_cell_by_edge;
+  // Removal: the hole (the removed vertex's star), its boundary facets keyed by
+  // small-id triple, and the link triangulation that refills it.
+  std::vector<CellId> hole;
+  IdMap hole_facet_by_triple;
+  IdMap star_seen;                   // cells met by collect_star
+  std::vector<VertexId> link;        // finite link vertices, in small-id order (small id = index + 1)
+  IdMap small_id;                    // big id -> small id (0 for the infinite vertex)
+  std::vector<std::uint32_t> small_facet_boundary;  // 4*small cell + facet -> boundary index or no_index
+  std::vector<CellId> small_inside;  // small cells inside the hole
+  std::vector<CellId> small_to_new;  // small cell -> the new big cell sewn in for it
+  std::vector<CellId> small_star;
+  std::unique_ptr<Triangulation::Impl> small;  // a removal's link triangulation
+
+  std::uint64_t next_stamp() { return (std::uint64_t{id} << 48) | (stamp_counter += 2); }
+  std::uint64_t next_random() {
+    rng ^= rng << 13;
+    rng ^= rng >> 7;
+    rng ^= rng << 17;
+    return rng;
+  }
+};
+
+}  // namespace pdt::detail

@@ -1,0 +1,63 @@
+#pragma once
+// The records a triangulation is made of, and how they are encoded.
+//
+//   CellRec.v[i]  vertex i of the cell. Vertex 0 is the infinite vertex.
+//   CellRec.n[i]  4 * d + j: cell d shares this cell's facet i (the facet
+//                 opposite v[i]) and that facet is d's facet j. So following an
+//                 adjacency and finding the mirror facet is one load.
+//                 A free cell has v[0] == no_vertex and n[0] == the next free
+//                 cell of the pool that owns it.
+//   VertexRec     point, one incident cell, multiplicity, lock word, stamp.
+//                 A free vertex has multiplicity 0 and cell == the next free
+//                 vertex of its pool (while dimension < 3, a live vertex's cell
+//                 is its position in the flat list instead).
+//
+// Facet i of a cell lists its vertices in facet_vertex[i] order, so that every
+// facet is seen with the same handedness from its cell: two cells sharing a
+// facet list it in opposite cyclic orders.
+#include <atomic>
+#include <cstdint>
+
+#include "pdt/triangulation.hpp"
+#include "predicates.hpp"
+
+namespace pdt::detail {
+
+struct CellRec {
+  VertexId v[4];
+  std::uint32_t n[4];
+};
+
+struct VertexRec {
+  KPoint p;
+  CellId cell = no_cell;
+  std::uint32_t multiplicity = 0;
+  // 0 free, k > 0 held shared by k readers, -(owner) held exclusively by the
+  // context whose id is owner (vertex_locks.cpp).
+  std::atomic<std::int32_t> lock{0};
+  // Unique per vertex incarnation; 0 when free. Atomic so that a thread
+  // submitting a removal can read it without a lock: it is stored (release)
+  // after p on allocation, cleared on release.
+  std::atomic<std::uint64_t> stamp{0};
+};
+
+inline constexpr int facet_vertex[4][3] = {{1, 3, 2}, {0, 2, 3}, {0, 3, 1}, {0, 1, 2}};
+
+inline constexpr std::uint32_t no_index = 0xFFFFFFFFu;
+
+// A singly linked free list of cell or vertex ids threaded through the
+// records (CellRec.n[0], VertexRec.cell). count == 0 <=> head == tail == no_index.
+struct FreeList {
+  std::uint32_t head = no_index;
+  std::uint32_t tail = no_index;
+  std::size_t count = 0;
+};
+
+// What an operation of the kernel ended with.
+enum class OpStatus {
+  done,
+  rollback,     // met a lock held by another thread; nothing was changed
+  needs_global  // would change the dimension: must run with the world stopped
+};
+
+}  // namespace pdt::detail

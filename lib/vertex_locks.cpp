@@ -1,0 +1,62 @@
+// Per-vertex try-locks (paper §3.2). One atomic word per vertex:
+//   0          free
+//   k > 0      held shared by k readers
+//   -(owner)   held exclusively by the context whose id is owner
+// A context records what it holds (held_shared, held_exclusive) so that it
+// can release everything at once, on success or on a rollback. With a
+// non-locking context (the sequential triangulation) every call succeeds.
+// The infinite vertex is never locked.
+#include <algorithm>
+
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+using detail::OpContext;
+
+bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
+  if (!ctx.locking || v == 0) return true;
+  std::atomic<std::int32_t>& w = verts[v].lock;
+  std::int32_t cur = w.load(std::memory_order_relaxed);
+  if (cur == -static_cast<std::int32_t>(ctx.id)) return true;
+  for (VertexId h : ctx.held_shared)
+    if (h == v) return true;
+  while (cur >= 0)
+    if (w.compare_exchange_weak(cur, cur + 1, std::memory_order_acquire, std::memory_order_relaxed)) {
+      ctx.held_shared.push_back(v);
+      return true;
+    }
+  return false;
+}
+
+bool Triangulation::Impl::lock_exclusive(OpContext& ctx, VertexId v) {
+  if (!ctx.locking || v == 0) return true;
+  std::atomic<std::int32_t>& w = verts[v].lock;
+  const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
+  std::int32_t cur = w.load(std::memory_order_relaxed);
+  if (cur == mine) return true;
+  auto it = std::find(ctx.held_shared.begin(), ctx.held_shared.end(), v);
+  std::int32_t expect = it != ctx.held_shared.end() ? 1 : 0;  // upgrade: we must be the only reader
+  if (!w.compare_exchange_strong(expect, mine, std::memory_order_acquire, std::memory_order_relaxed)) return false;
+  if (it != ctx.held_shared.end()) {
+    *it = ctx.held_shared.back();
+    ctx.held_shared.pop_back();
+  }
+  ctx.held_exclusive.push_back(v);
+  return true;
+}
+
+bool Triangulation::Impl::lock_cell_exclusive(OpContext& ctx, CellId c) {
+  const VertexId* v = cells[c].v;
+  return lock_exclusive(ctx, v[0]) && lock_exclusive(ctx, v[1]) && lock_exclusive(ctx, v[2]) &&
+         lock_exclusive(ctx, v[3]);
+}
+
+void Triangulation::Impl::release_all(OpContext& ctx) {
+  for (VertexId v : ctx.held_exclusive) verts[v].lock.store(0, std::memory_order_release);
+  for (VertexId v : ctx.held_shared) verts[v].lock.fetch_sub(1, std::memory_order_release);
+  ctx.held_exclusive.clear();
+  ctx.held_shared.clear();
+}
+
+}  // namespace pdt

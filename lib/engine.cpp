@@ -1,6 +1,6 @@
-// pdt::Engine's public API: construction, submission, drain, statistics.
-// The workers themselves are in engine_workers.cpp; the rooms are listed in
-// engine_state.hpp.
+// pdt::Engine's public API: attaching, submission, drain, statistics. The
+// scheduler is in engine_scheduler.cpp, running an operation in
+// engine_execute.cpp; the rooms are listed in engine_state.hpp.
 #include "pdt/engine.hpp"
 
 #include <algorithm>
@@ -20,7 +20,25 @@ using detail::OpRecord;
 
 namespace detail {
 
-EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsigned nw, unsigned blocks,
+namespace {
+// An engine destroyed from its own work cannot be torn down: its state is
+// kept here, reachable (not a leak), for the rest of the process.
+void keep_orphan(EngineState* e) {
+  static std::mutex m;
+  static auto* orphans = new std::vector<EngineState*>();  // never freed, on purpose
+  std::lock_guard lock(m);
+  try {
+    orphans->push_back(e);
+  } catch (...) {
+    // No room to keep it: it stays allocated, unreachable.
+  }
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// Attaching and detaching
+// ---------------------------------------------------------------------------
+EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsigned nw, unsigned b,
                          tbb::task_arena* a)
     : impl(impl_of(t)),
       domain(d),
@@ -28,80 +46,140 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
       attached(tbb::task_arena::attach{}),
       arena(a ? a : &attached),
       nworkers(nw),
-      partition(d, blocks, nw),
+      partition(d, b, nw),
+      blocks(std::make_unique<Block[]>(partition.blocks())),
       world(nw) {
-  for (unsigned i = 0; i < nworkers; ++i)
-    workers.push_back(std::make_unique<Worker>(i, i + 2, opts));  // context id 1 is the sequential one
+  // Everything that may fail comes first; the triangulation is touched last.
+  for (std::uint32_t i = 0; i < partition.blocks(); ++i) blocks[i].home = partition.home_of(i);
+  sleepers.reserve(nworkers);
+  workers.reserve(nworkers);
+  for (unsigned i = 0; i < nworkers; ++i) workers.push_back(std::make_unique<Worker>(i, impl.new_context_id(), opts));
+  kernel_hook = [this](const Changes& c) {
+    try {
+      if (user_hook) user_hook(c);
+    } catch (...) {
+      record_client_error(std::current_exception());
+    }
+  };
+  ensure_grid();  // built aside: a failure leaves the old grid
+  bodies.reserve(nworkers);
   for (auto& w : workers) {
-    bodies.push_back(body(*w));
+    bodies.push_back(body(*w));  // room reserved: no throw after the frame exists
     w->handle = bodies.back().handle;
   }
+  idle_count.store(static_cast<int>(nworkers));
   impl.grid_growth = Triangulation::Impl::GridGrowth::engine;
-  ensure_grid();
+  impl.seq->hook = nullptr;  // the engine's hook (set_change_hook) reports its global steps
+  impl.seq->report_destroyed = false;
 }
 
+EngineState::~EngineState() {
+  for (auto& b : bodies) b.handle.destroy();
+  // Give the workers' pools and statistics back to the triangulation.
+  for (auto& w : workers) {
+    impl.merge_pools(*impl.seq, *w->ctx);
+    impl.seq->stats += w->ctx->stats;
+  }
+  impl.seq->hook = impl.hook ? &impl.hook : nullptr;
+  impl.seq->report_destroyed = impl.report_destroyed;
+  impl.grid_growth = Triangulation::Impl::GridGrowth::kernel;
+}
+
+void EngineState::record_client_error(std::exception_ptr e) {
+  client_errors.fetch_add(1, std::memory_order_relaxed);
+  std::lock_guard lock(client_error_mutex);
+  if (!first_client_error) first_client_error = std::move(e);
+}
+
+// ---------------------------------------------------------------------------
+// Submission
+// ---------------------------------------------------------------------------
 OpRecord* EngineState::make_insert(const Point3& p) {
   require_finite(p);
   require_inside(p, domain);
+  tickets.sweep_if_large(impl.verts, static_cast<std::uint64_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
   OpRecord* op = records.acquire();
+  try {
+    op->ticket = tickets.issue(1);
+  } catch (...) {
+    records.release(op);
+    throw;
+  }
   op->kind = OpKind::insert;
   op->point = p;
-  op->ticket = tickets.issue(std::span<const Point3>(&p, 1));
   return op;
 }
 
-OpRecord* EngineState::make_remove(VertexId v) {
-  if (v == 0 || v >= impl.verts.size())
-    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
-  // The caller got v from a completed insertion it has not undone yet, so v
-  // stays live, and its point and stamp fixed, until this removal runs: they
-  // are read without a lock (the submitter is no worker and must not wait on
-  // one). Read as a sequence lock, so a misused id (dead, or recycled right
-  // now) gives stamp 0 or a changed stamp and a clean error, here or when the
-  // removal runs and checks the incarnation under the vertex's lock.
-  VertexRec& rec = impl.verts[v];
-  const std::uint64_t stamp = rec.stamp.load(std::memory_order_acquire);
-  const Point3 where{rec.p.x(), rec.p.y(), rec.p.z()};
-  std::atomic_thread_fence(std::memory_order_acquire);
-  if (stamp == 0 || rec.stamp.load(std::memory_order_relaxed) != stamp)
-    throw Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v) + ": it is not in the triangulation");
+OpRecord* EngineState::make_remove(VertexHandle v) {
+  auto dead = [&] {
+    return Error(ErrorCode::unknown_vertex, "cannot remove vertex " + std::to_string(v.id) +
+                                                ": it is not in the triangulation (never inserted, already removed" +
+                                                (v.incarnation ? ", or that incarnation is gone)" : ")"));
+  };
+  if (v.id == 0 || v.id >= impl.verts.size()) throw dead();
+  const std::uint64_t stamp = impl.verts[v.id].stamp.load(std::memory_order_acquire);
+  if (stamp == 0 || (v.incarnation && v.incarnation != stamp)) throw dead();
   OpRecord* op = records.acquire();
   op->kind = OpKind::remove;
-  op->vertex = v;
-  op->stamp = stamp;  // the incarnation seen now: a later reuse of the id is not removed
-  op->point = where;
+  op->vertex = v.id;
+  op->stamp = v.incarnation ? v.incarnation : stamp;  // the incarnation seen now: a reuse of the id is not removed
+  // Where it is: read under a shared lock if free; if a worker holds it right
+  // now, the worker that pops the removal reads it.
+  std::uint64_t now = 0;
+  if (try_read_vertex(impl, v.id, op->stamp, &op->point, &now)) return op;
+  if (impl.verts[v.id].lock.load(std::memory_order_relaxed) < 0) {
+    op->routed = false;  // held by a worker right now: the worker that pops it reads it
+    return op;
+  }
+  records.release(op);
+  throw dead();
   return op;
 }
 
 void EngineState::submit(OpRecord* op) {
-  Worker& w = *workers[partition.worker_of(op->point)];
-  w.submitted.fetch_add(1, std::memory_order_relaxed);
-  enqueue(w, op);
+  // An operation whose place is unknown yet goes to a block picked by its
+  // vertex id; the worker that pops it moves it on (engine_execute.cpp).
+  const std::uint32_t b = op->routed ? partition.block_of(op->point) : op->vertex % partition.blocks();
+  Block& block = blocks[b];
+  block.submitted.fetch_add(1, std::memory_order_relaxed);
+  enqueue(block, op);
 }
 
-void EngineState::submit_undo(std::uint64_t t, const Engine::Callback& done) {
-  OpRecord& op = *records.acquire();
-  op.kind = OpKind::remove_insertion;
-  op.ticket = t;
-  op.point = tickets[t].point;
-  op.done = done;
-  submit(&op);
+void EngineState::submit_undo(std::uint64_t t, const TicketView& view, Engine::Callback done,
+                              BatchCallback* batch_done) {
+  OpRecord* op = records.acquire();
+  op->kind = OpKind::remove_insertion;
+  op->ticket = t;
+  op->done = std::move(done);
+  op->batch_done = batch_done;
+  if (view.state == TicketState::inserted) {
+    // Routed by its vertex (read like a removal's); if that is held right
+    // now, the worker that pops it reads it.
+    op->vertex = view.vertex;
+    op->stamp = view.stamp;
+    op->routed = false;
+  }
+  // A pending insertion: any block will do, the undo parks on its ticket and
+  // the insertion's completion routes it to the vertex.
+  submit(op);
 }
 
 }  // namespace detail
 
 // ---------------------------------------------------------------------------
-// Construction
+// Construction and destruction
 // ---------------------------------------------------------------------------
 Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::task_arena* arena) {
   auto bad = [](const std::string& what) { throw Error(ErrorCode::invalid_argument, what); };
-  if (detail::box_problem(domain)) bad("the engine's domain box must be finite with lo <= hi on every axis");
+  if (const char* why = detail::box_problem(domain))
+    bad(std::string("the engine's domain box ") + why + "; it must be finite with lo <= hi on every axis");
   if (!(options.contention_low >= 0 && options.contention_low <= options.contention_high &&
         options.contention_high <= 1))
     bad("contention thresholds must satisfy 0 <= contention_low <= contention_high <= 1");
   if (options.workers == 0) options.workers = options.threads;  // the 0.1 name
   if (options.workers > 4096) bad("workers must be at most 4096");
-  if (options.blocks_per_axis > 1024) bad("blocks_per_axis must be at most 1024");
+  if (options.blocks_per_axis > detail::Partition::max_blocks_per_axis)
+    bad("blocks_per_axis must be at most " + std::to_string(detail::Partition::max_blocks_per_axis));
   if (options.contention_window == 0) options.contention_window = 1;
   tbb::task_arena attached(tbb::task_arena::attach{});
   tbb::task_arena* where = arena ? arena : &attached;
@@ -109,47 +187,129 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
   const unsigned workers = options.workers ? options.workers : static_cast<unsigned>(std::max(1, where->max_concurrency()));
   unsigned blocks = options.blocks_per_axis;
   if (!blocks)
-    while (blocks * blocks * blocks < 4 * workers) ++blocks;
-  state_ = std::make_unique<EngineState>(t, domain, options, workers, blocks, arena);
+    while (blocks < detail::Partition::max_blocks_per_axis && blocks * blocks * blocks < 64 * workers) ++blocks;
+  // One engine at a time: attach (a refusal changes nothing), then build.
+  Triangulation::Impl& impl = detail::impl_of(t);
+  const void* none = nullptr;
+  if (!impl.engine.compare_exchange_strong(none, this))
+    bad("another Engine is attached to this triangulation: one engine at a time may drive a triangulation; destroy "
+        "the first before creating the next");
+  try {
+    state_ = std::make_unique<EngineState>(t, domain, options, workers, blocks, arena);
+  } catch (...) {
+    impl.engine.store(nullptr, std::memory_order_release);
+    throw;
+  }
 }
 
-Engine::~Engine() {
+Engine::~Engine() noexcept(false) {
   if (!state_) return;
-  drain();
   EngineState& e = *state_;
-  for (auto& b : e.bodies) b.handle.destroy();
-  // Give the workers' pools and statistics back to the triangulation.
-  Triangulation::Impl& impl = e.impl;
-  for (auto& w : e.workers) {
-    impl.merge_pools(*impl.seq, *w->ctx);
-    impl.seq->stats += w->ctx->stats;
+  if (EngineState::running_engine == &e) {
+    // The destructor runs inside the engine's own work: the task running it
+    // belongs to the engine, so the engine cannot be torn down under it.
+    detail::keep_orphan(state_.release());
+    throw Error(ErrorCode::invalid_argument,
+                "an Engine was destroyed from one of its own callbacks, hooks or coroutines: it cannot destroy the "
+                "work that runs it; destroy it from a thread outside the engine's work (the engine is left running "
+                "and leaked)");
   }
-  impl.grid_growth = Triangulation::Impl::GridGrowth::kernel;
+  try {
+    drain();
+  } catch (...) {
+    // A client error drain() would rethrow: nobody asked for it any more
+    // (EngineStats::client_errors counted it).
+  }
+  Triangulation::Impl& impl = e.impl;
+  state_.reset();
+  impl.engine.store(nullptr, std::memory_order_release);
 }
 
 // ---------------------------------------------------------------------------
 // Submission
 // ---------------------------------------------------------------------------
+namespace {
+
+template <class Awaitable>
+Awaitable request(Engine* engine, OpKind kind) {
+  Awaitable a;
+  a.engine = engine;
+  a.request.kind = kind;
+  return a;
+}
+
+}  // namespace
+
 InsertAwaitable Engine::insert(const Point3& p) {
-  InsertAwaitable a;
-  a.engine = this;
-  a.point_ = p;
+  auto a = request<InsertAwaitable>(this, OpKind::insert);
+  a.request.point = p;
   return a;
 }
 
-RemoveAwaitable Engine::remove(VertexId v) {
-  RemoveAwaitable a;
-  a.engine = this;
-  a.vertex_ = v;
+RemoveAwaitable Engine::remove(VertexId v) { return remove(VertexHandle{v, 0}); }
+
+RemoveAwaitable Engine::remove(VertexHandle v) {
+  auto a = request<RemoveAwaitable>(this, OpKind::remove);
+  a.request.vertex = v;
   return a;
 }
 
-bool InsertAwaitable::await_suspend(std::coroutine_handle<> h) {
+LocateAwaitable Engine::locate(const Point3& p) {
+  auto a = request<LocateAwaitable>(this, OpKind::locate);
+  a.request.point = p;
+  return a;
+}
+
+NearestAwaitable Engine::nearest_vertex(const Point3& p) {
+  auto a = request<NearestAwaitable>(this, OpKind::nearest_vertex);
+  a.request.point = p;
+  return a;
+}
+
+VisitAwaitable Engine::visit(CellHandle h, CellVisitor fn) {
+  auto a = request<VisitAwaitable>(this, OpKind::visit);
+  a.request.cell = h;
+  a.request.visitor = std::move(fn);
+  return a;
+}
+
+namespace detail {
+
+// The record for a request of any kind but the ticket ones; throws pdt::Error
+// for bad input, having submitted nothing.
+OpRecord* make_record(EngineState& e, Request& q) {
+  switch (q.kind) {
+    case OpKind::insert: return e.make_insert(q.point);
+    case OpKind::remove: return e.make_remove(q.vertex);
+    case OpKind::locate:
+    case OpKind::nearest_vertex: {
+      require_finite(q.point);
+      OpRecord* op = e.records.acquire();
+      op->kind = q.kind;
+      op->point = q.point;
+      return op;
+    }
+    case OpKind::visit: {
+      OpRecord* op = e.records.acquire();
+      op->kind = OpKind::visit;
+      op->cell = q.cell;
+      op->vertex = q.cell.anchor;
+      op->visitor = std::move(q.visitor);
+      op->routed = false;  // where the anchor is: read by the worker that pops it
+      if (q.cell.anchor == 0 || q.cell.anchor == no_vertex) op->routed = true;  // no anchor: dead at once
+      return op;
+    }
+    case OpKind::remove_insertion: break;
+  }
+  throw Error(ErrorCode::invalid_argument, "this request has no awaitable form");
+}
+
+bool OpAwaitBase::await_suspend(std::coroutine_handle<> h) {
   waiter = h;
   EngineState& e = *engine->state_;
   OpRecord* op;
   try {
-    op = e.make_insert(point_);
+    op = make_record(e, request);
   } catch (...) {
     result.error = std::current_exception();
     return false;  // await_resume throws it
@@ -159,41 +319,41 @@ bool InsertAwaitable::await_suspend(std::coroutine_handle<> h) {
   return true;
 }
 
-InsertResult InsertAwaitable::await_resume() {
-  if (result.error) std::rethrow_exception(result.error);
-  return result.insert;
-}
-
-bool RemoveAwaitable::await_suspend(std::coroutine_handle<> h) {
-  waiter = h;
-  EngineState& e = *engine->state_;
-  OpRecord* op;
-  try {
-    op = e.make_remove(vertex_);
-  } catch (...) {
-    result.error = std::current_exception();
-    return false;
-  }
-  op->awaiter = this;
-  e.submit(op);
-  return true;
-}
-
-RemoveResult RemoveAwaitable::await_resume() {
-  if (result.error) std::rethrow_exception(result.error);
-  return result.remove;
-}
+}  // namespace detail
 
 Engine::Ticket Engine::insert(const Point3& p, Callback done) {
   OpRecord* op = state_->make_insert(p);
   op->done = std::move(done);
-  Ticket t = op->ticket;
+  const Ticket t = op->ticket;
   state_->submit(op);
   return t;
 }
 
-void Engine::remove(VertexId v, Callback done) {
+void Engine::remove(VertexId v, Callback done) { remove(VertexHandle{v, 0}, std::move(done)); }
+
+void Engine::remove(VertexHandle v, Callback done) {
   OpRecord* op = state_->make_remove(v);
+  op->done = std::move(done);
+  state_->submit(op);
+}
+
+void Engine::locate(const Point3& p, Callback done) {
+  detail::Request q{OpKind::locate, p, {}, {}, {}};
+  OpRecord* op = detail::make_record(*state_, q);
+  op->done = std::move(done);
+  state_->submit(op);
+}
+
+void Engine::nearest_vertex(const Point3& p, Callback done) {
+  detail::Request q{OpKind::nearest_vertex, p, {}, {}, {}};
+  OpRecord* op = detail::make_record(*state_, q);
+  op->done = std::move(done);
+  state_->submit(op);
+}
+
+void Engine::visit(CellHandle h, CellVisitor fn, Callback done) {
+  detail::Request q{OpKind::visit, {}, {}, h, std::move(fn)};
+  OpRecord* op = detail::make_record(*state_, q);
   op->done = std::move(done);
   state_->submit(op);
 }
@@ -207,16 +367,37 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   if (points.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument,
                 "insert_batch: " + std::to_string(points.size()) + " points; vertex ids allow at most 2^32 - 2");
+  if (points.empty()) return e.tickets.issued();
   std::vector<std::uint32_t> order;
   e.arena->execute([&] { order = detail::spatial_order(points, true); });
-  const Ticket first = e.tickets.issue(points);
-  for (std::uint32_t i : order) {
-    OpRecord* op = e.records.acquire();
+  // Everything that may fail, before the first submission.
+  auto shared = std::make_unique<detail::BatchCallback>();
+  shared->fn = std::move(done);
+  shared->remaining.store(points.size());
+  std::vector<OpRecord*> ops(points.size());
+  std::size_t made = 0;
+  try {
+    for (; made < points.size(); ++made) ops[made] = e.records.acquire();
+  } catch (...) {
+    for (std::size_t i = 0; i < made; ++i) e.records.release(ops[i]);
+    throw;
+  }
+  Ticket first = 0;
+  try {
+    first = e.tickets.issue(points.size());
+  } catch (...) {
+    for (OpRecord* op : ops) e.records.release(op);
+    throw;
+  }
+  detail::BatchCallback* batch_done = shared.release();  // the last operation frees it
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const std::uint32_t i = order[k];
+    OpRecord* op = ops[k];
     op->kind = OpKind::insert;
     op->point = points[i];
     op->ticket = first + i;
     op->from_batch = true;
-    op->done = done;
+    op->batch_done = batch_done;
     e.submit(op);
   }
   return first;
@@ -225,28 +406,59 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
 InsertResult Engine::insertion_result(Ticket t) const { return state_->tickets.result(t); }
 
 void Engine::remove_insertion(Ticket t, Callback done) {
-  state_->tickets.claim_undo(t);
-  state_->submit_undo(t, done);
+  const detail::TicketView view = state_->tickets.claim_undo(t);
+  try {
+    state_->submit_undo(t, view, std::move(done), nullptr);
+  } catch (...) {
+    state_->tickets.unclaim_undo(t);
+    throw;
+  }
 }
 
 void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
   EngineState& e = *state_;
   if (batch.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument, "remove_insertions: " + std::to_string(batch.size()) + " tickets; at most 2^32 - 2");
+  if (batch.empty()) return;
   // All or nothing: claim every ticket, and give the claims back on the first bad one.
+  std::vector<detail::TicketView> views(batch.size());
   for (std::size_t i = 0; i < batch.size(); ++i) {
     try {
-      e.tickets.claim_undo(batch[i]);
+      views[i] = e.tickets.claim_undo(batch[i]);
     } catch (...) {
       for (std::size_t j = 0; j < i; ++j) e.tickets.unclaim_undo(batch[j]);
       throw;
     }
   }
+  // Spatial order, by the vertices' points where they can be read now.
   std::vector<Point3> where(batch.size());
-  for (std::size_t i = 0; i < batch.size(); ++i) where[i] = e.tickets[batch[i]].point;
+  for (std::size_t i = 0; i < batch.size(); ++i) {
+    std::uint64_t stamp = 0;
+    if (views[i].state == detail::TicketState::inserted && views[i].vertex < e.impl.verts.size())
+      detail::try_read_vertex(e.impl, views[i].vertex, views[i].stamp, &where[i], &stamp);
+  }
   std::vector<std::uint32_t> order;
   e.arena->execute([&] { order = detail::spatial_order(where, true); });
-  for (std::uint32_t i : order) e.submit_undo(batch[i], done);
+  auto shared = new detail::BatchCallback();
+  shared->fn = std::move(done);
+  shared->remaining.store(batch.size());
+  for (std::uint32_t i : order) e.submit_undo(batch[i], views[i], {}, shared);
+}
+
+void Engine::set_change_hook(ChangeHook hook, bool report_destroyed) {
+  EngineState& e = *state_;
+  if (!e.idle_everywhere())
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::set_change_hook while operations are in flight: set the hook before submitting, or after "
+                "drain()");
+  e.user_hook = std::move(hook);
+  const ChangeHook* h = e.user_hook ? &e.kernel_hook : nullptr;
+  for (auto& w : e.workers) {
+    w->ctx->hook = h;
+    w->ctx->report_destroyed = report_destroyed;
+  }
+  e.impl.seq->hook = h;
+  e.impl.seq->report_destroyed = report_destroyed;
 }
 
 // ---------------------------------------------------------------------------
@@ -256,18 +468,27 @@ void Engine::drain() {
   EngineState& e = *state_;
   if (EngineState::running_engine == &e)
     throw Error(ErrorCode::invalid_argument,
-                "Engine::drain() was called from one of this engine's callbacks or from a coroutine resumed by "
-                "it; it would wait for itself. Call drain() from a thread outside the engine's work (or co_await "
-                "each operation instead)");
+                "Engine::drain() was called from one of this engine's callbacks, hooks or coroutines; it would wait "
+                "for itself. Call drain() from a thread outside the engine's work (or co_await each operation "
+                "instead)");
   while (!e.idle_everywhere()) {
     e.arena->execute([&] { e.tasks.wait(); });
     if (!e.idle_everywhere()) {
-      // Every task ended with work left: it sits with sleepers. Wake them.
-      if (!e.wake_one()) std::this_thread::yield();
+      // Every task ended with work left: it sits with sleepers (or a
+      // submitter is between its push and its wake-up). Wake someone.
+      if (!e.wake_one() && !e.wake_idle()) std::this_thread::yield();
     }
   }
   e.arena->execute([&] { e.tasks.wait(); });  // continuations of awaiting coroutines
+  std::exception_ptr first;
+  {
+    std::lock_guard lock(e.client_error_mutex);
+    first.swap(e.first_client_error);
+  }
+  if (first) std::rethrow_exception(first);
 }
+
+std::uint64_t Engine::in_flight() const { return state_->in_flight(); }
 
 EngineStats Engine::stats() const {
   const EngineState& e = *state_;
@@ -279,11 +500,14 @@ EngineStats Engine::stats() const {
     ws.rollbacks = w->rollbacks.load();
     ws.deferred = w->deferred.load();
     ws.sleeps = w->sleeps.load();
+    ws.steals = w->steals.load();
+    ws.escalated = w->escalated.load();
     ws.seconds_asleep = w->seconds_asleep.load();
     ws.max_rollbacks_per_completed = ws.completed ? static_cast<double>(ws.rollbacks) / ws.completed : 0;
     s.workers.push_back(ws);
   }
   s.global_operations = e.global_ops.load();
+  s.client_errors = e.client_errors.load();
   return s;
 }
 

@@ -1,4 +1,5 @@
 // EngineOptions from the environment, the allocator's name, summed statistics.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <string>
@@ -35,6 +36,12 @@ EngineOptions EngineOptions::from_environment(EngineOptions o) {
   env_number("PDT_CONTENTION_HIGH", o.contention_high);
   env_number("PDT_CONTENTION_WINDOW", o.contention_window);
   env_number("PDT_GRID_SLOTS", o.grid_slots);
+  env_number("PDT_ESCALATE_AFTER", o.escalate_after);
+  unsigned stealing = o.stealing ? 1 : 0;
+  if (env_number("PDT_STEALING", stealing)) {
+    if (stealing > 1) throw Error(ErrorCode::invalid_argument, "PDT_STEALING must be 0 or 1");
+    o.stealing = stealing == 1;
+  }
   return o;
 }
 
@@ -48,6 +55,16 @@ const char* allocator_name() {
 #endif
 }
 
+double EngineStats::imbalance() const {
+  if (workers.empty()) return 1;
+  double sum = 0, most = 0;
+  for (const WorkerStats& w : workers) {
+    sum += static_cast<double>(w.completed);
+    most = std::max(most, static_cast<double>(w.completed));
+  }
+  return sum > 0 ? most / (sum / static_cast<double>(workers.size())) : 1;
+}
+
 WorkerStats EngineStats::total() const {
   WorkerStats t;
   for (const WorkerStats& w : workers) {
@@ -56,6 +73,8 @@ WorkerStats EngineStats::total() const {
     t.rollbacks += w.rollbacks;
     t.deferred += w.deferred;
     t.sleeps += w.sleeps;
+    t.steals += w.steals;
+    t.escalated += w.escalated;
     t.seconds_asleep += w.seconds_asleep;
     t.max_rollbacks_per_completed = std::max(t.max_rollbacks_per_completed, w.max_rollbacks_per_completed);
   }

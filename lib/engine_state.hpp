@@ -1,38 +1,46 @@
 #pragma once
 // The engine's state, by room:
-//   partition.hpp          blocks of the domain -> workers (routing)
+//   partition.hpp          blocks of the domain along a Morton curve, homes
+//   block_queue.hpp        the operations waiting in one block
 //   op_record.hpp          submitted operations and their pool
 //   tickets.hpp            insertions by ticket, and undos waiting for them
 //   contention_manager.hpp the progress ratio and its verdicts
-//   stopped_world.hpp      running alone (dimension changes, grid growth)
-//   engine_workers.cpp     the workers: coroutine bodies, phases, wake-ups,
-//                          running one operation and completing it
+//   stopped_world.hpp      running alone (dimension changes, escalations, grid growth)
+//   engine_scheduler.cpp   the workers: coroutine bodies, claiming blocks
+//                          (home first, then stealing), phases and wake-ups
+//   engine_execute.cpp     running one operation and completing it
 //   engine.cpp             the public API: submission, drain, statistics
 //
-// Phases of a worker (a C++20 coroutine run as TBB tasks):
-//   idle      its queue was empty; suspended. A submission to its queue
-//             resumes it as a new task.
-//   running   pops operations and runs them; a rollback re-queues the
-//             operation at the back of its own queue.
+// Phases of a worker (a C++20 coroutine run as oneTBB tasks):
+//   idle      found no block it may serve; suspended. A submission to its home
+//             (or, when it may steal, any busy block) resumes it as a new task.
+//   running   claims a non-empty block, serves up to `batch` of its operations,
+//             releases it, claims the next; a rollback re-queues the operation
+//             at the back of its block.
 //   sleeping  suspended by the contention manager (progress ratio below u-);
-//             woken by a worker whose ratio is above u+, or by any worker
-//             going idle, or by drain().
-// Invariants:
-//   - `active` counts running workers; a worker never goes to sleep when it is
-//     the last one running, so while work is pending some worker runs (or a
-//     sleeper holds it and drain() wakes it).
-//   - per worker, finished <= submitted; drain() returns when they are equal
-//     for every worker.
-#include <boost/lockfree/queue.hpp>
+//             woken by a worker whose ratio is above u+, a worker going idle,
+//             a submission when nobody runs, or drain(). Its blocks may be
+//             served by others meanwhile (stealing), so a sleeper never holds
+//             work hostage.
+// Invariants (checked in debug builds where they are local):
+//   - a block is served by at most one worker: Block::holder;
+//   - `active` counts running workers; a worker never sleeps when it is the
+//     last one running, and a worker goes idle only after a scan, made after
+//     it announced itself idle, found nothing it may serve: so while work is
+//     pending some worker runs, or a submitter or drain() resumes one;
+//   - submitted (summed over blocks) >= finished (summed over workers);
+//     drain() returns when they are equal.
 #include <oneapi/tbb/task_group.h>
 
 #include <atomic>
 #include <chrono>
 #include <coroutine>
+#include <exception>
 #include <memory>
 #include <mutex>
 #include <vector>
 
+#include "block_queue.hpp"
 #include "contention_manager.hpp"
 #include "op_record.hpp"
 #include "partition.hpp"
@@ -43,6 +51,25 @@
 
 namespace pdt::detail {
 
+// Reads a live vertex's point from any thread, without a context: one shared
+// lock, taken only if free (a writer holds it exclusively while it changes
+// the vertex). False if it is held exclusively right now, or is not a live
+// vertex of the expected incarnation (0: any).
+inline bool try_read_vertex(const Triangulation::Impl& m, VertexId v, std::uint64_t expected, Point3* p,
+                            std::uint64_t* stamp) {
+  std::atomic<std::int32_t>& lock = const_cast<Triangulation::Impl&>(m).verts[v].lock;
+  std::int32_t cur = lock.load(std::memory_order_relaxed);
+  do {
+    if (cur < 0) return false;
+  } while (!lock.compare_exchange_weak(cur, cur + 1, std::memory_order_acquire, std::memory_order_relaxed));
+  const VertexRec& r = m.verts[v];
+  *stamp = r.stamp.load(std::memory_order_relaxed);
+  const bool ok = r.multiplicity > 0 && (expected == 0 || *stamp == expected);
+  if (ok) *p = {r.p.x(), r.p.y(), r.p.z()};
+  lock.fetch_sub(1, std::memory_order_release);
+  return ok;
+}
+
 // A worker's body: a coroutine that never returns; destroyed while suspended.
 struct WorkerCoroutine {
   struct promise_type {
@@ -50,12 +77,20 @@ struct WorkerCoroutine {
     std::suspend_always initial_suspend() noexcept { return {}; }
     std::suspend_always final_suspend() noexcept { return {}; }
     void return_void() {}
-    void unhandled_exception() { std::terminate(); }  // operations catch their own errors
+    void unhandled_exception() { std::terminate(); }  // everything it calls catches its own errors
   };
   std::coroutine_handle<promise_type> handle;
 };
 
 enum class WorkerPhase : int { idle, running, sleeping };
+
+struct alignas(64) Block {
+  BlockQueue queue;
+  std::atomic<int> holder{-1};            // the worker serving it, or -1
+  std::atomic<std::uint32_t> queued{0};   // pushed and not popped (counted before the push)
+  std::atomic<std::uint64_t> submitted{0};  // operations routed here, ever
+  unsigned home = 0;
+};
 
 struct alignas(64) Worker {
   Worker(unsigned i, std::uint32_t context_id, const EngineOptions& o)
@@ -65,76 +100,99 @@ struct alignas(64) Worker {
 
   unsigned index;
   std::unique_ptr<OpContext> ctx;
-  // Boost.Lockfree over oneTBB's concurrent_queue: 2x the throughput with one
-  // producer and far better when threads outnumber cores (bench_queues).
-  boost::lockfree::queue<OpRecord*> queue{256};
   std::atomic<WorkerPhase> phase{WorkerPhase::idle};
   std::coroutine_handle<> handle;
   ContentionManager contention;  // owned by the worker's running task
+  std::uint32_t home_cursor = 0;  // next home block to look at (round robin)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
   std::chrono::steady_clock::time_point slept_at;
   // Statistics: written by the worker, read by stats() (relaxed).
-  std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0};
+  std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},
+      escalated{0};
   std::atomic<double> seconds_asleep{0};
-  // Operations routed here, counted by submitters before the push (its own
-  // cache line: submitters write it, the worker never does), and operations
-  // finished, counted by the worker after their results are delivered.
-  std::atomic<std::uint64_t> finished{0};
-  alignas(64) std::atomic<std::uint64_t> submitted{0};
+  std::atomic<std::uint64_t> finished{0};  // operations whose results were delivered
 };
 
 struct EngineState {
   EngineState(Triangulation& t, const Box& d, EngineOptions o, unsigned workers, unsigned blocks, tbb::task_arena* a);
+  ~EngineState();
 
   Triangulation::Impl& impl;
   Box domain;
   EngineOptions opts;
   tbb::task_arena attached;  // the caller's arena when none is passed
   tbb::task_arena* arena;
-  tbb::task_group tasks;
+  // Isolated: a cancellation in the submitter's context (a parallel_for whose
+  // body throws) does not reach the engine's tasks.
+  tbb::task_group_context group_context{tbb::task_group_context::isolated};
+  tbb::task_group tasks{group_context};
   unsigned nworkers;
   Partition partition;
+  std::unique_ptr<Block[]> blocks;
   std::vector<std::unique_ptr<Worker>> workers;
   std::vector<WorkerCoroutine> bodies;
   TicketTable tickets;
   OpRecordPool records;
   StoppedWorld world;
   std::mutex sleep_mutex;
-  std::vector<Worker*> sleepers;
+  std::vector<Worker*> sleepers;  // room for every worker: pushing never allocates
   std::atomic<int> active{0};
+  std::atomic<int> idle_count{0};
   std::atomic<std::uint64_t> global_ops{0};
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
+  // The change hook, and the wrapper the kernel calls (it catches).
+  ChangeHook user_hook;
+  ChangeHook kernel_hook;
+  // The first exception a callback, hook or resumed coroutine threw.
+  std::mutex client_error_mutex;
+  std::exception_ptr first_client_error;
+  std::atomic<std::uint64_t> client_errors{0};
+
+  static constexpr std::uint32_t batch = 64;  // operations served per block claim
 
   // -- submission (engine.cpp) ---------------------------------------------------
   OpRecord* make_insert(const Point3& p);
-  OpRecord* make_remove(VertexId v);
+  OpRecord* make_remove(VertexHandle v);
   void submit(OpRecord* op);
-  void submit_undo(std::uint64_t t, const Engine::Callback& done);
+  void submit_undo(std::uint64_t t, const TicketView& view, Engine::Callback done, BatchCallback* batch_done);
+  void record_client_error(std::exception_ptr e);
 
-  // -- scheduling (engine_workers.cpp) -------------------------------------------
+  // -- scheduling (engine_scheduler.cpp) -----------------------------------------
   // Runs h (a worker body or a coroutine awaiting a result) as a task of
   // `tasks`, marked as this engine's so drain() can refuse to wait for itself.
+  // An exception escaping h is a client error.
   void spawn(std::coroutine_handle<> h);
   // The engine whose task the current thread is running, if any.
   static thread_local const EngineState* running_engine;
-  void enqueue(Worker& w, OpRecord* op);  // push and make sure w will run (op already counted)
+  void enqueue(Block& b, OpRecord* op);  // push and make sure someone serves b (op already counted)
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
-  bool wake_one();
+  bool wake_one();         // a sleeper, if any
+  bool wake_idle();        // an idle worker, if any (to take over busy blocks)
   void wake_locked(Worker& w);  // takes w off `sleepers` (caller holds sleep_mutex)
-  bool idle_everywhere() const;  // no operation pending on any worker
+  bool may_serve(const Worker& w, const Block& b) const;
+  Block* claim(Worker& w);       // a non-empty block w may serve, claimed; or null
+  bool work_for(const Worker& w) const;  // is there a block w may claim?
+  void release(Block& b);
+  bool idle_everywhere() const;  // no operation pending
+  std::uint64_t in_flight() const;
   WorkerCoroutine body(Worker& w);
 
-  // -- running one operation (engine_workers.cpp) ------------------------------------
-  // The kernel call of one operation in ctx; the removal of a ticket uses the
-  // vertex its insertion produced.
+  // -- running one operation (engine_execute.cpp) ------------------------------------
+  // done: completed; rollback: met a lock (the body re-queues it); parked:
+  // handed on (waiting on its ticket, or moved to its block); global: the
+  // world is stopped (re-queued; the worker waits for the restart).
+  enum class Outcome { done, rollback, parked, global };
+  Outcome execute(Worker& w, OpRecord* op);
+  // The kernel call of one operation in ctx.
   OpStatus run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp);
-  void execute(Worker& w, OpRecord* op);
-  void run_global(Worker& w, OpRecord* op);
+  // Runs op with the world stopped; false if another worker holds the world
+  // (op untouched: re-queue it).
+  bool run_global(Worker& w, OpRecord* op, bool escalated = false);
   void complete(Worker& w, OpRecord* op, OpResult& r, std::uint64_t stamp);
 
-  // -- the jump grid's growth (engine_workers.cpp) -----------------------------------
+  // -- the jump grid's growth, with the world stopped ---------------------------------
   void ensure_grid();  // with the world stopped (or before workers run)
   void maybe_grow_grid(Worker& w);
 };

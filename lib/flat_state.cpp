@@ -1,5 +1,5 @@
 // Dimension < 3: while the live points are coplanar there is no tetrahedron;
-// the vertices are kept in a list (with a point hash for duplicates) until an
+// the vertices are kept in a list (with a point index for duplicates) until an
 // affinely independent 4th arrives and build_3d makes the first tetrahedron.
 // A removal that leaves a coplanar set drops back here. Single-threaded only:
 // the engine runs these with the world stopped.
@@ -9,15 +9,15 @@
 #include <cstring>
 
 #include "box_lattice.hpp"
-#include "mix64.hpp"
+#include "fault_injection.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
 
 using detail::facet_vertex;
 using detail::KPoint;
-using detail::mix64;
 using detail::OpContext;
+using detail::OpStatus;
 using detail::orient;
 
 namespace {
@@ -31,41 +31,35 @@ std::array<VertexId, 3> facet_key(VertexId a, VertexId b, VertexId c) {
 
 }  // namespace
 
-std::uint64_t Triangulation::Impl::point_hash(const KPoint& p) {
-  std::uint64_t h = 0;
-  const double c[3] = {p.x(), p.y(), p.z()};
-  for (double d : c) {
-    std::uint64_t bits;
-    std::memcpy(&bits, &d, sizeof bits);
-    h = mix64(h ^ bits);
-  }
-  return h;
-}
-
-VertexId Triangulation::Impl::find_flat(const KPoint& p) const {
-  auto it = flat_index.find(point_hash(p));
-  if (it == flat_index.end()) return no_vertex;
-  for (VertexId w : it->second)
-    if (pt(w) == p) return w;
-  return no_vertex;
-}
-
 InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
   if (VertexId w = find_flat(p); w != no_vertex) {
     ++verts[w].multiplicity;
     ++ctx.stats.duplicates;
     return {w, false};
   }
-  bool raises_to_3d = basis.dimension() == 2 && basis.raises(p);
+  const bool raises_to_3d = basis.dimension() == 2 && basis.raises(p);
+  if (!raises_to_3d) {
+    // Room first: after alloc_vertex nothing may fail.
+    PDT_FAULT_POINT("flat list");
+    flat.reserve(flat.size() + 1);
+    flat_index.reserve(flat.size() + 1, verts);
+    begin_report(ctx, 0, 0);
+  }
   VertexId v = alloc_vertex(ctx, p);
   if (raises_to_3d) {
-    build_3d(ctx, v);
-    return {v, true};
+    try {
+      build_3d(ctx, v);
+    } catch (...) {
+      free_vertex(ctx, v);
+      throw;
+    }
+  } else {
+    verts[v].cell = static_cast<CellId>(flat.size());
+    flat.push_back(v);
+    flat_index.insert(v, verts);
+    if (basis.offer(v, pt(v))) dim = basis.dimension();
   }
-  verts[v].cell = static_cast<CellId>(flat.size());
-  flat.push_back(v);
-  flat_index[point_hash(p)].push_back(v);
-  if (basis.offer(v, pt(v))) dim = basis.dimension();
+  end_report(ctx, OpKind::insert, v, verts[v].stamp.load(std::memory_order_relaxed));
   return {v, true};
 }
 
@@ -77,112 +71,148 @@ void Triangulation::Impl::recompute_basis() {
   dim = basis.dimension();
 }
 
-void Triangulation::Impl::remove_flat(OpContext& ctx, VertexId v) {
+OpStatus Triangulation::Impl::remove_flat(OpContext& ctx, VertexId v) {
+  begin_report(ctx, 0, 0);
   std::size_t pos = verts[v].cell;
   flat[pos] = flat.back();
   verts[flat[pos]].cell = static_cast<CellId>(pos);
   flat.pop_back();
-  auto it = flat_index.find(point_hash(pt(v)));
-  auto& bucket = it->second;
-  bucket.erase(std::find(bucket.begin(), bucket.end(), v));
-  if (bucket.empty()) flat_index.erase(it);
-  bool was_basis = basis.contains(v);
+  flat_index.erase(v, verts);
+  const bool was_basis = basis.contains(v);
   free_vertex(ctx, v);
   if (ctx.last_vertex == no_vertex && !flat.empty()) ctx.last_vertex = flat.back();
   if (was_basis) recompute_basis();
+  return OpStatus::done;
 }
 
 void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
   // First tetrahedron: the basis and the apex, positively oriented; then the
   // 4 infinite cells over its facets. Then every other listed vertex is
-  // inserted; the result does not depend on that order.
-  VertexId t[4] = {basis[0], basis[1], basis[2], apex};
-  if (orient(pt(t[0]), pt(t[1]), pt(t[2]), pt(t[3])) < 0) std::swap(t[0], t[1]);
-  CellId all[5];
-  all[0] = alloc_cell(ctx);
-  std::memcpy(cells[all[0]].v, t, sizeof t);
-  ++ctx.d_finite_cells;
-  for (int i = 0; i < 4; ++i) {
-    all[i + 1] = alloc_cell(ctx);
-    VertexId u[4] = {t[0], t[1], t[2], t[3]};
-    u[i] = 0;
-    // Replacing v_i by a point beyond facet i flips the sign: swap two others.
-    std::swap(u[(i + 1) & 3], u[(i + 2) & 3]);
-    std::memcpy(cells[all[i + 1]].v, u, sizeof u);
-  }
-  // Link by matching facets (5 cells: quadratic is fine).
-  for (int a = 0; a < 5; ++a)
-    for (int fa = 0; fa < 4; ++fa)
-      for (int b = a + 1; b < 5; ++b)
-        for (int fb = 0; fb < 4; ++fb) {
-          const VertexId* va = cells[all[a]].v;
-          const VertexId* vb = cells[all[b]].v;
-          if (facet_key(va[facet_vertex[fa][0]], va[facet_vertex[fa][1]], va[facet_vertex[fa][2]]) ==
-              facet_key(vb[facet_vertex[fb][0]], vb[facet_vertex[fb][1]], vb[facet_vertex[fb][2]]))
-            set_adjacency(all[a], fa, all[b], fb);
-        }
-  for (int i = 0; i < 4; ++i) verts[t[i]].cell = all[0];
-  dim.store(3, std::memory_order_release);
+  // inserted; the result does not depend on that order. The flat list and
+  // index stay as they are until the end: if anything fails on the way, the
+  // cells made so far go and the flat state is back as it was.
+  const int flat_dim = basis.dimension();
+  ctx.recording = false;  // the hook hears of the final cells only (below)
   std::vector<VertexId> rest;
-  rest.swap(flat);
+  try {
+    PDT_FAULT_POINT("first tetrahedron");
+    rest.reserve(flat.size());
+    VertexId t[4] = {basis[0], basis[1], basis[2], apex};
+    if (orient(pt(t[0]), pt(t[1]), pt(t[2]), pt(t[3])) < 0) std::swap(t[0], t[1]);
+    reserve_cells(ctx, 5);
+    CellId all[5];
+    all[0] = alloc_cell(ctx);
+    std::memcpy(cells[all[0]].v, t, sizeof t);
+    ++ctx.d_finite_cells;
+    for (int i = 0; i < 4; ++i) {
+      all[i + 1] = alloc_cell(ctx);
+      VertexId u[4] = {t[0], t[1], t[2], t[3]};
+      u[i] = 0;
+      // Replacing v_i by a point beyond facet i flips the sign: swap two others.
+      std::swap(u[(i + 1) & 3], u[(i + 2) & 3]);
+      std::memcpy(cells[all[i + 1]].v, u, sizeof u);
+    }
+    // Link by matching facets (5 cells: quadratic is fine).
+    for (int a = 0; a < 5; ++a)
+      for (int fa = 0; fa < 4; ++fa)
+        for (int b = a + 1; b < 5; ++b)
+          for (int fb = 0; fb < 4; ++fb) {
+            const VertexId* va = cells[all[a]].v;
+            const VertexId* vb = cells[all[b]].v;
+            if (facet_key(va[facet_vertex[fa][0]], va[facet_vertex[fa][1]], va[facet_vertex[fa][2]]) ==
+                facet_key(vb[facet_vertex[fb][0]], vb[facet_vertex[fb][1]], vb[facet_vertex[fb][2]]))
+              set_adjacency(all[a], fa, all[b], fb);
+          }
+    for (int i = 0; i < 4; ++i) verts[t[i]].cell = all[0];
+    dim.store(3, std::memory_order_release);
+    for (VertexId v : flat)
+      if (v != t[0] && v != t[1] && v != t[2]) rest.push_back(v);
+    // Insert the rest in Morton order, each walk starting from the previous
+    // vertex: short walks without the jump grid, which must not name a vertex
+    // before it is in the triangulation.
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    for (VertexId v : rest) {
+      const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+    }
+    const detail::BoxLattice lattice(lo, hi, 1024);
+    auto morton = [&](VertexId v) {
+      const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
+      std::uint64_t key = 0;
+      for (int a = 0; a < 3; ++a) {
+        const auto q = static_cast<std::uint64_t>(lattice.index(a, c[a]));
+        for (int b = 0; b < 10; ++b) key |= ((q >> b) & 1u) << (3 * b + a);
+      }
+      return key;
+    };
+    std::vector<std::pair<std::uint64_t, VertexId>> order;
+    order.reserve(rest.size());
+    for (VertexId v : rest) order.emplace_back(morton(v), v);
+    std::sort(order.begin(), order.end());
+    grid = detail::JumpGrid{};
+    VertexId prev = apex;
+    for (auto [key, v] : order) {
+      bool outside = false;
+      CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
+      gather_conflict_zone(ctx, pt(v), c);
+      reserve_cells(ctx, ctx.boundary.size());
+      PDT_FAULT_POINT("edge map");
+      ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
+      cone_from_vertex(ctx, v);
+      prev = v;
+    }
+    // What the hook hears: every cell now live, made by this one insertion.
+    std::size_t live_cells = 0;
+    for (CellId c = 0; c < cells.size(); ++c) live_cells += cell_alive(c);
+    begin_report(ctx, live_cells, 0);
+  } catch (...) {
+    // Back to the flat state: no cell, the flat vertices' positions restored.
+    const bool recording = ctx.recording;
+    ctx.recording = false;
+    free_all_cells(ctx);
+    ctx.recording = recording;
+    for (std::size_t i = 0; i < flat.size(); ++i) verts[flat[i]].cell = static_cast<CellId>(i);
+    dim.store(flat_dim, std::memory_order_release);
+    grid = detail::JumpGrid{};
+    throw;
+  }
+  if (ctx.recording)
+    for (CellId c = 0; c < cells.size(); ++c)
+      if (cell_alive(c)) note_created(ctx, c);
+  flat.clear();
   flat_index.clear();
   basis.clear();
-  rest.erase(std::remove_if(rest.begin(), rest.end(),
-                            [&](VertexId v) { return v == t[0] || v == t[1] || v == t[2] || v == t[3]; }),
-             rest.end());
-  // Insert the rest in Morton order, each walk starting from the previous
-  // vertex: short walks without the jump grid, which must not name a vertex
-  // before it is in the triangulation.
-  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-  for (VertexId v : rest) {
-    const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
-  }
-  const detail::BoxLattice lattice(lo, hi, 1024);
-  auto morton = [&](VertexId v) {
-    const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-    std::uint64_t key = 0;
-    for (int a = 0; a < 3; ++a) {
-      const auto q = static_cast<std::uint64_t>(lattice.index(a, c[a]));
-      for (int b = 0; b < 10; ++b) key |= ((q >> b) & 1u) << (3 * b + a);
-    }
-    return key;
-  };
-  std::vector<std::pair<std::uint64_t, VertexId>> order;
-  order.reserve(rest.size());
-  for (VertexId v : rest) order.emplace_back(morton(v), v);
-  std::sort(order.begin(), order.end());
-  grid = detail::JumpGrid{};
-  VertexId prev = apex;
-  for (auto [key, v] : order) {
-    bool outside = false;
-    CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
-    gather_conflict_zone(ctx, pt(v), c);
-    cone_from_vertex(ctx, v);
-    prev = v;
-  }
   fold_counters(ctx);
-  grid_rebuild();
+  try {
+    grid_rebuild();
+  } catch (const std::bad_alloc&) {
+    grid = detail::JumpGrid{};  // walks start elsewhere; the next growth retries
+  }
   ctx.last_vertex = apex;
   recent_vertex.store(apex, std::memory_order_relaxed);
 }
 
-void Triangulation::Impl::drop_to_flat(OpContext& ctx) {
-  // The live vertices are coplanar (or fewer than 4): forget the cells.
+void Triangulation::Impl::drop_to_flat(OpContext& ctx, VertexId v) {
+  // The live vertices but v are coplanar (or fewer than 4): every cell goes.
   // Cells go back to this context's pool (other pools' free lists stay valid).
-  for (CellId c = 0; c < cells.size(); ++c) {
-    if (!cell_alive(c)) continue;
-    if (!cell_infinite(c)) --ctx.d_finite_cells;
-    free_cell(ctx, c);
-  }
+  // Room for the flat list first: past it nothing may fail.
+  std::size_t survivors = 0, live_cells = 0;
+  for (VertexId w = 1; w < verts.size(); ++w) survivors += w != v && verts[w].multiplicity > 0;
+  for (CellId c = 0; c < cells.size(); ++c) live_cells += cell_alive(c);
+  PDT_FAULT_POINT("flat list");
   flat.clear();
   flat_index.clear();
+  flat.reserve(survivors);
+  flat_index.reserve(survivors, verts);
+  begin_report(ctx, 0, live_cells);
+  free_all_cells(ctx);
+  free_vertex(ctx, v);
   grid = detail::JumpGrid{};
-  for (VertexId v = 1; v < verts.size(); ++v) {
-    if (verts[v].multiplicity == 0) continue;
-    verts[v].cell = static_cast<CellId>(flat.size());
-    flat.push_back(v);
-    flat_index[point_hash(pt(v))].push_back(v);
+  for (VertexId w = 1; w < verts.size(); ++w) {
+    if (verts[w].multiplicity == 0) continue;
+    verts[w].cell = static_cast<CellId>(flat.size());
+    flat.push_back(w);
+    flat_index.insert(w, verts);
   }
   recompute_basis();
   ctx.last_vertex = flat.empty() ? no_vertex : flat.back();

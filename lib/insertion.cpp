@@ -3,6 +3,7 @@
 // from the new vertex over the zone's boundary.
 #include <cstring>
 
+#include "fault_injection.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -26,6 +27,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     if (ctx.locking) return OpStatus::needs_global;
     out.result = insert_flat(ctx, p);
     out.stamp = verts[out.result.vertex].stamp.load(std::memory_order_relaxed);
+    out.result.incarnation = out.stamp;
     ++ctx.stats.insertions;
     fold_counters(ctx);
     return OpStatus::done;
@@ -59,76 +61,112 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
         ++ctx.stats.duplicates;
         ++ctx.stats.insertions;
         release_all(ctx);
-        out.result = {w, false};
+        out.result = {w, false, out.stamp};
         return OpStatus::done;
       }
     }
   }
   if (!lock_cell_exclusive(ctx, c)) return rollback();
   if (gather_conflict_zone(ctx, p, c) != OpStatus::done) return rollback();
-  VertexId v = alloc_vertex(ctx, p);
+  // Everything the change needs, before its first write: cells, map room,
+  // report room, the vertex. A failure here changes nothing.
+  try {
+    reserve_cells(ctx, ctx.boundary.size());
+    PDT_FAULT_POINT("edge map");
+    ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
+    begin_report(ctx, ctx.boundary.size(), ctx.conflict_zone.size());
+  } catch (...) {
+    release_all(ctx);
+    throw;
+  }
+  VertexId v = alloc_vertex(ctx, p);  // a fresh id can always be locked: it cannot fail once reserved
   out.stamp = verts[v].stamp.load(std::memory_order_relaxed);
   cone_from_vertex(ctx, v);
   grid_note(ctx, v);
   // A start for contexts that know no vertex yet; refreshed rarely (shared line).
-  if ((ctx.vertex_counter & 63) == 1) recent_vertex.store(v, std::memory_order_relaxed);
+  if ((ctx.insertions_made & 63) == 1) recent_vertex.store(v, std::memory_order_relaxed);
   ++ctx.stats.insertions;
+  try {
+    end_report(ctx, OpKind::insert, v, out.stamp);
+  } catch (...) {
+    release_all(ctx);
+    end_op_counters(ctx);
+    throw;
+  }
   release_all(ctx);
   end_op_counters(ctx);
-  out.result = {v, true};
+  out.result = {v, true, out.stamp};
   return OpStatus::done;
 }
 
 OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0) {
   // Bowyer-Watson: the cells whose (perturbed) circumsphere contains p form a
   // connected, star-shaped conflict zone; search it breadth first. c0 is held
-  // exclusively; each cell joining the zone is locked exclusively before
-  // its own neighbours are read.
-  const std::uint64_t in = ctx.next_stamp(), out = in + 1;
+  // exclusively; each cell joining the zone is locked exclusively before its
+  // own neighbours are read. Marks: in for the zone, out for a cell found
+  // outside it; every mark set here is cleared before returning.
   std::vector<CellId>& zone = ctx.conflict_zone;
   zone.clear();
   ctx.boundary.clear();
-  marks[c0] = in;
-  zone.push_back(c0);
-  for (std::size_t idx = 0; idx < zone.size(); ++idx) {
-    CellId c = zone[idx];
-    for (int i = 0; i < 4; ++i) {
-      std::uint32_t nw = cells[c].n[i];
-      CellId nb = nw >> 2;
-      std::uint64_t m = marks[nb];
-      if (m == in) continue;
-      if (m != out) {
-        if (in_conflict(nb, p)) {
-          if (!lock_exclusive(ctx, cells[nb].v[nw & 3])) return OpStatus::rollback;
-          marks[nb] = in;
-          zone.push_back(nb);
-          continue;
+  auto unmark = [&] {
+    for (CellId c : zone) set_mark(c, 0);
+    for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
+  };
+  OpStatus status = OpStatus::done;
+  try {
+    set_mark(c0, mark_in);
+    zone.push_back(c0);
+    for (std::size_t idx = 0; idx < zone.size() && status == OpStatus::done; ++idx) {
+      CellId c = zone[idx];
+      for (int i = 0; i < 4; ++i) {
+        std::uint32_t nw = cells[c].n[i];
+        CellId nb = nw >> 2;
+        const std::uint32_t m = mark(nb);
+        if (m == mark_in) continue;
+        if (m != mark_out) {
+          if (in_conflict(nb, p)) {
+            if (!lock_exclusive(ctx, cells[nb].v[nw & 3])) {
+              status = OpStatus::rollback;
+              break;
+            }
+            PDT_FAULT_POINT("conflict zone");
+            zone.push_back(nb);
+            set_mark(nb, mark_in);
+            continue;
+          }
         }
-        marks[nb] = out;
+        OpContext::BoundaryFacet bf;
+        std::memcpy(bf.v, cells[c].v, sizeof bf.v);
+        bf.outer = nw;
+        bf.facet = i;
+        PDT_FAULT_POINT("conflict zone");
+        ctx.boundary.push_back(bf);
+        set_mark(nb, mark_out);
       }
-      OpContext::BoundaryFacet bf;
-      std::memcpy(bf.v, cells[c].v, sizeof bf.v);
-      bf.outer = nw;
-      bf.facet = i;
-      ctx.boundary.push_back(bf);
     }
+  } catch (...) {
+    unmark();
+    throw;
   }
-  return OpStatus::done;
+  unmark();
+  return status;
 }
 
 void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
   // Replace the conflict zone by the cone from v over its boundary. Its cells
-  // are recycled first so the new cells reuse their memory.
+  // are recycled first so the new cells reuse their memory. Nothing here
+  // allocates: the caller reserved the cells and the edge map.
   for (CellId c : ctx.conflict_zone) {
     if (!cell_infinite(c)) --ctx.d_finite_cells;
+    note_destroyed(ctx, c);
     free_cell(ctx, c);
   }
   detail::IdMap& edges = ctx.new_cell_by_edge;
-  edges.reserve_for(3 * ctx.boundary.size());
   edges.clear();
   for (OpContext::BoundaryFacet& bf : ctx.boundary) {
     bf.v[bf.facet] = v;
     CellId nc = alloc_cell(ctx);
+    note_created(ctx, nc);
     CellRec& r = cells[nc];
     std::memcpy(r.v, bf.v, sizeof r.v);
     set_adjacency(nc, bf.facet, bf.outer >> 2, static_cast<int>(bf.outer & 3));

@@ -10,6 +10,7 @@ using detail::KPoint;
 using detail::OpContext;
 using detail::orient;
 using detail::perturbed_incircle;
+using detail::OpStatus;
 using detail::perturbed_insphere;
 
 CellId Triangulation::Impl::finite_cell_of(VertexId v) const {
@@ -121,10 +122,163 @@ void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
   if (grid_growth == GridGrowth::kernel &&
       static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed) + ctx.d_vertices) >= 2 * grid.built_for + 64) {
     fold_counters(ctx);
-    grid_rebuild();
+    try {
+      grid_rebuild();
+    } catch (const std::bad_alloc&) {
+      // The insertion is done; walks start from the old grid, which stays.
+    }
     return;
   }
   if (grid.slot_count) grid.set(grid.slot_of(pt(v)), v);
+}
+
+// Holds (shared) a cell containing s and, if that cell is infinite, its
+// finite neighbour across the hull facet instead; returns it, or no_cell on a
+// conflict.
+namespace {
+CellId hold_start_cell(const Triangulation::Impl& m, OpContext& ctx, VertexId s) {
+  Triangulation::Impl& self = const_cast<Triangulation::Impl&>(m);
+  CellId c = m.verts[s].cell;
+  for (int i = 0; i < 4; ++i)
+    if (!self.lock_shared(ctx, m.cells[c].v[i])) return no_cell;
+  if (int k = m.index_of(c, 0); k >= 0) {
+    const std::uint32_t nw = m.cells[c].n[k];
+    c = nw >> 2;
+    if (!self.lock_shared(ctx, m.cells[c].v[nw & 3])) return no_cell;
+  }
+  return c;
+}
+}  // namespace
+
+OpStatus Triangulation::Impl::locate(OpContext& ctx, const KPoint& q, VertexId hint, CellId hint_cell,
+                                     LocateResult& out) const {
+  Impl& self = *const_cast<Impl*>(this);
+  out = {};
+  if (dim.load(std::memory_order_acquire) < 3) {
+    if (ctx.locking) return OpStatus::needs_global;
+    VertexId w = find_flat(q);
+    if (w != no_vertex) out.vertex = w, out.kind = LocateKind::on_vertex;
+    return OpStatus::done;
+  }
+  auto rollback = [&] {
+    self.release_all(ctx);
+    return OpStatus::rollback;
+  };
+  CellId start = no_cell;
+  if (!ctx.locking && hint_cell != no_cell && cell_alive(hint_cell)) {
+    start = hint_cell;
+    if (int k = index_of(start, 0); k >= 0) start = cells[start].n[k] >> 2;
+  } else {
+    const VertexId s = start_vertex(ctx, q, hint);
+    if (s == no_vertex) return rollback();
+    start = hold_start_cell(*this, ctx, s);
+    if (start == no_cell) return rollback();
+  }
+  bool outside = false;
+  const CellId c = walk(ctx, q, start, &outside);
+  if (c == no_cell) return rollback();
+  out.cell = c;
+  if (outside) {
+    out.kind = LocateKind::outside_hull;
+  } else {
+    const CellRec& cr = cells[c];
+    int zeros = 0;
+    for (int i = 0; i < 4; ++i) {
+      const KPoint* a[4] = {&pt(cr.v[0]), &pt(cr.v[1]), &pt(cr.v[2]), &pt(cr.v[3])};
+      a[i] = &q;
+      if (orient(*a[0], *a[1], *a[2], *a[3]) == 0) ++zeros;
+      if (pt(cr.v[i]) == q) out.vertex = cr.v[i];
+    }
+    out.kind = zeros == 0   ? LocateKind::in_cell
+               : zeros == 1 ? LocateKind::on_facet
+               : zeros == 2 ? LocateKind::on_edge
+                            : LocateKind::on_vertex;
+  }
+  self.release_all(ctx);
+  return OpStatus::done;
+}
+
+OpStatus Triangulation::Impl::nearest_vertex(OpContext& ctx, const KPoint& q, VertexId& out) const {
+  Impl& self = *const_cast<Impl*>(this);
+  auto closer = [&](VertexId a, VertexId b) {  // a strictly closer to q than b
+    return b == no_vertex || CGAL::compare_distance_to_point(q, pt(a), pt(b)) == CGAL::SMALLER;
+  };
+  out = no_vertex;
+  if (dim.load(std::memory_order_acquire) < 3) {
+    if (ctx.locking) return OpStatus::needs_global;
+    for (VertexId w : flat)
+      if (closer(w, out)) out = w;
+    return OpStatus::done;
+  }
+  auto rollback = [&] {
+    self.release_all(ctx);
+    return OpStatus::rollback;
+  };
+  const VertexId s = start_vertex(ctx, q, no_vertex);
+  if (s == no_vertex) return rollback();
+  const CellId start = hold_start_cell(*this, ctx, s);
+  if (start == no_cell) return rollback();
+  bool outside = false;
+  const CellId c = walk(ctx, q, start, &outside);
+  if (c == no_cell) return rollback();
+  VertexId best = no_vertex;
+  for (int i = 0; i < 4; ++i) {
+    const VertexId w = cells[c].v[i];
+    if (w != 0 && closer(w, best)) best = w;
+  }
+  // Greedy descent on the Delaunay graph ends at the nearest vertex: a vertex
+  // with no strictly closer neighbour is a nearest one (its Voronoi cell holds
+  // q). Holding best (shared) pins its star, so its neighbours can be read.
+  std::vector<CellId>& star = ctx.small_star;
+  while (true) {
+    self.collect_star(ctx, best, star);
+    VertexId next = best;
+    for (CellId sc : star)
+      for (int i = 0; i < 4; ++i) {
+        const VertexId w = cells[sc].v[i];
+        if (w != 0 && closer(w, next)) next = w;
+      }
+    if (next == best) break;
+    if (!self.lock_shared(ctx, next)) return rollback();
+    best = next;
+  }
+  out = best;
+  self.release_all(ctx);
+  return OpStatus::done;
+}
+
+OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* alive, CellView* view,
+                                        const std::function<void(const CellView&)>* while_held) const {
+  Impl& self = *const_cast<Impl*>(this);
+  *alive = false;
+  if (h.anchor == 0 || h.anchor >= verts.size() || h.id >= cells.size()) return OpStatus::done;
+  if (!self.lock_shared(ctx, h.anchor)) {
+    self.release_all(ctx);
+    return OpStatus::rollback;
+  }
+  // The anchor held: its star cannot change, and (c, incarnation) names one
+  // cell ever, so finding it there means it is alive and is h's cell.
+  if (verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3) {
+    self.collect_star(ctx, h.anchor, ctx.small_star);
+    for (CellId c : ctx.small_star)
+      if (c == h.id && incarnation(c) == h.incarnation) {
+        *alive = true;
+        CellView local;
+        CellView& out = view ? *view : local;
+        fill_view(c, out);
+        if (while_held && *while_held) {
+          try {
+            (*while_held)(out);
+          } catch (...) {
+            self.release_all(ctx);
+            throw;
+          }
+        }
+        break;
+      }
+  }
+  self.release_all(ctx);
+  return OpStatus::done;
 }
 
 void Triangulation::Impl::grid_rebuild(std::size_t slots) {

@@ -8,18 +8,21 @@
 #include <vector>
 
 #include "id_map.hpp"
+#include "pdt/changes.hpp"
 #include "pdt/triangulation.hpp"
 #include "storage.hpp"
 
 namespace pdt::detail {
 
 struct OpContext {
+  // id: unique among the contexts alive on one triangulation (lock owner);
+  // Triangulation::Impl::new_context_id() gives them.
   OpContext(std::uint32_t id, bool locking);
   ~OpContext();
   OpContext(const OpContext&) = delete;
   OpContext& operator=(const OpContext&) = delete;
 
-  const std::uint32_t id;  // 1..; lock owner id and stamp prefix
+  const std::uint32_t id;  // 1..; lock owner id
   const bool locking;      // false: single-threaded, every try-lock succeeds
 
   // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
@@ -32,7 +35,10 @@ struct OpContext {
   // -- counters (net changes, folded into the Impl's totals by fold_counters) -
   std::int64_t d_vertices = 0, d_cells = 0, d_finite_cells = 0;
   TriangulationStats stats;
-  std::uint64_t stamp_counter = 0, vertex_counter = 0;
+  // Vertex incarnations: a block [incarnation_next, incarnation_end) drawn from
+  // the triangulation's life-long source, so they never repeat.
+  std::uint64_t incarnation_next = 0, incarnation_end = 0;
+  std::uint64_t insertions_made = 0;  // vertices this context created (paces shared hints)
   std::uint64_t rng;
   // The vertex this context touched last: where its next walk starts when
   // nothing better is known. Kernel-internal; results are returned, not kept here.
@@ -63,9 +69,20 @@ struct OpContext {
   std::vector<CellId> small_inside;  // small cells inside the hole
   std::vector<CellId> small_to_new;  // small cell -> the new big cell sewn in for it
   std::vector<CellId> small_star;
+  std::vector<std::uint32_t> small_seen;  // small cell -> flood generation that reached it
+  std::uint32_t small_generation = 0;
   std::unique_ptr<Triangulation::Impl> small;  // a removal's link triangulation
 
-  std::uint64_t next_stamp() { return (std::uint64_t{id} << 48) | (stamp_counter += 2); }
+  // -- change reporting (changes.hpp) -------------------------------------------
+  // Set by the context's owner: the triangulation's hook for the sequential
+  // context, the engine's for its workers (and for the sequential context
+  // while the engine is attached).
+  const ChangeHook* hook = nullptr;
+  bool report_destroyed = false;
+  bool recording = false;              // the current operation records its changes
+  std::vector<CellId> created;         // cells the current operation made
+  std::vector<CellHandle> destroyed;   // cells it deleted (when report_destroyed)
+  std::vector<CellView> views;         // the report's cells
   std::uint64_t next_random() {
     rng ^= rng << 13;
     rng ^= rng >> 7;

@@ -1,23 +1,61 @@
 #include "op_record.hpp"
 
+#include <functional>
+#include <thread>
+
+#include "fault_injection.hpp"
+
 namespace pdt::detail {
 
+OpRecordPool::OpRecordPool() = default;
+OpRecordPool::~OpRecordPool() = default;
+
+unsigned OpRecordPool::my_shard() {
+  thread_local const unsigned shard =
+      static_cast<unsigned>(std::hash<std::thread::id>()(std::this_thread::get_id()) % shards);
+  return shard;
+}
+
 OpRecord* OpRecordPool::acquire() {
-  OpRecord* op = nullptr;
-  if (free_.pop(op)) return op;
-  constexpr std::size_t slab = 4096;
-  std::lock_guard lock(slab_mutex_);
-  slabs_.push_back(std::make_unique<OpRecord[]>(slab));
-  OpRecord* s = slabs_.back().get();
-  for (std::size_t i = 1; i < slab; ++i) free_.push(&s[i]);
-  return &s[0];
+  const unsigned home = my_shard();
+  for (unsigned k = 0; k < shards; ++k) {
+    Shard& s = shards_[(home + k) % shards];
+    std::lock_guard lock(s.mutex);
+    if (OpRecord* op = s.head) {
+      s.head = op->next.load(std::memory_order_relaxed);
+      return op;
+    }
+  }
+  constexpr std::size_t slab = 1024;
+  PDT_FAULT_POINT("op record slab");
+  auto fresh = std::make_unique<OpRecord[]>(slab);
+  OpRecord* first = fresh.get();
+  {
+    std::lock_guard lock(slab_mutex_);
+    slabs_.push_back(std::move(fresh));
+  }
+  Shard& s = shards_[home];
+  std::lock_guard lock(s.mutex);
+  for (std::size_t i = 1; i < slab; ++i) {
+    first[i].next.store(s.head, std::memory_order_relaxed);
+    s.head = &first[i];
+  }
+  return first;
 }
 
 void OpRecordPool::release(OpRecord* op) {
   op->done = nullptr;
+  op->visitor = nullptr;
+  op->batch_done = nullptr;
   op->awaiter = nullptr;
   op->from_batch = false;
-  free_.push(op);
+  op->routed = true;
+  op->rollbacks = 0;
+  op->stamp = 0;
+  Shard& s = shards_[my_shard()];
+  std::lock_guard lock(s.mutex);
+  op->next.store(s.head, std::memory_order_relaxed);
+  s.head = op;
 }
 
 }  // namespace pdt::detail

@@ -1,8 +1,8 @@
 #pragma once
-// OpRecord: one submitted operation while it waits in a queue or runs; and the
-// pool that recycles records, so submitting allocates nothing once warm.
-#include <boost/lockfree/stack.hpp>
-
+// OpRecord: one submitted operation while it waits in a queue, waits on a
+// ticket, or runs; and the pool that recycles records, so that submitting
+// allocates nothing once warm.
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -12,27 +12,50 @@
 
 namespace pdt::detail {
 
+// One callback shared by the operations of a batch: freed by the last one.
+struct BatchCallback {
+  Engine::Callback fn;
+  std::atomic<std::uint64_t> remaining{0};
+};
+
 struct OpRecord {
+  std::atomic<OpRecord*> next{nullptr};  // BlockQueue's link; the pool's too
   OpKind kind = OpKind::insert;
-  Point3 point;                 // insert: the point; removals: where the vertex is (routing)
+  bool from_batch = false;      // insert: part of a spatially sorted batch (walk from the last vertex)
+  bool routed = true;           // false: `point` unknown yet; the worker that pops it reads it and re-routes
+  std::uint32_t rollbacks = 0;  // times this operation met a lock (escalates at escalate_after)
+  Point3 point;                 // insert: the point; others: where it runs (routing)
   VertexId vertex = no_vertex;  // remove
   std::uint64_t stamp = 0;      // remove: the vertex incarnation expected (0 = any)
   std::uint64_t ticket = 0;     // insert: its own ticket; remove_insertion: the insertion undone
-  bool from_batch = false;      // insert: part of a spatially sorted batch (walk from the last vertex)
+  CellHandle cell;              // visit
+  CellVisitor visitor;          // visit
   Engine::Callback done;
+  BatchCallback* batch_done = nullptr;
   OpAwaitBase* awaiter = nullptr;
 };
 
-// Records are allocated in slabs and recycled through a lock-free free list.
-// Invariant: every record is either on the free list or owned by exactly one
-// submitted operation (in a queue, parked on a ticket, or running).
+// Records come in slabs and are recycled through free lists, one per shard
+// (a thread uses the shard its id hashes to), each under its own mutex.
+// Invariant: every record is either on a free list or owned by exactly one
+// submitted operation.
 class OpRecordPool {
  public:
-  OpRecord* acquire();
-  void release(OpRecord* op);  // resets the record and puts it back
+  OpRecordPool();
+  ~OpRecordPool();
+  OpRecordPool(const OpRecordPool&) = delete;
+  OpRecordPool& operator=(const OpRecordPool&) = delete;
+  OpRecord* acquire();          // throws std::bad_alloc (nothing changed)
+  void release(OpRecord* op);   // resets the record; never fails
 
  private:
-  boost::lockfree::stack<OpRecord*> free_{1024};
+  static constexpr unsigned shards = 16;
+  struct alignas(64) Shard {
+    std::mutex mutex;
+    OpRecord* head = nullptr;
+  };
+  static unsigned my_shard();
+  Shard shards_[shards];
   std::mutex slab_mutex_;
   std::vector<std::unique_ptr<OpRecord[]>> slabs_;
 };

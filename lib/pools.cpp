@@ -1,6 +1,7 @@
 // Storage and per-thread pools (paper §3.2): each context allocates cell and
 // vertex ids from its own free lists, refilled by chunks carved from the
 // shared StableArrays; its count changes are folded into the totals later.
+#include "fault_injection.hpp"
 #include "mix64.hpp"
 #include "triangulation_impl.hpp"
 
@@ -39,7 +40,7 @@ OpContext::~OpContext() = default;
 
 Triangulation::Impl::Impl(bool small_triangulation)
     : cells(small_triangulation ? max_small_cells : max_cells),
-      marks(small_triangulation ? max_small_cells : max_cells),
+      tags(small_triangulation ? max_small_cells : max_cells),
       verts(small_triangulation ? max_small_vertices : max_vertices),
       is_small(small_triangulation),
       seq(std::make_unique<OpContext>(1, false)) {
@@ -49,6 +50,43 @@ Triangulation::Impl::Impl(bool small_triangulation)
 
 Triangulation::Impl::~Impl() = default;
 
+std::uint32_t Triangulation::Impl::new_context_id() {
+  const std::uint32_t id = next_context_id.fetch_add(1, std::memory_order_relaxed);
+  // Lock words hold -(owner) in an int32: ids must stay below 2^31. Ids are
+  // handed out once per context ever made (an engine makes one per worker).
+  if (id >= (std::uint32_t{1} << 31)) throw std::bad_alloc();
+  return id;
+}
+
+std::uint64_t Triangulation::Impl::new_incarnation(OpContext& ctx) {
+  if (ctx.incarnation_next == ctx.incarnation_end) {
+    constexpr std::uint64_t block = std::uint64_t{1} << 16;
+    // 1-based: 0 means "no incarnation" (a free vertex).
+    ctx.incarnation_next = next_incarnation_block.fetch_add(block, std::memory_order_relaxed) + 1;
+    ctx.incarnation_end = ctx.incarnation_next + block;
+  }
+  return ctx.incarnation_next++;
+}
+
+void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
+  std::size_t have = ctx.free_cells.count + (ctx.fresh_cell_end - ctx.fresh_cell);
+  while (have < n) {
+    // A new chunk; the ids left in the current one go to the free list first.
+    PDT_FAULT_POINT("cell chunk");
+    const std::size_t first = cells.grow(cell_chunk);
+    tags.ensure_size(first + cell_chunk);
+    for (std::size_t i = first; i < first + cell_chunk; ++i) cells[i].v[0] = no_vertex;  // not live yet
+    while (ctx.fresh_cell != ctx.fresh_cell_end) {
+      const CellId c = ctx.fresh_cell++;
+      ++ctx.d_cells;  // free_cell counts a release
+      free_cell(ctx, c);
+    }
+    ctx.fresh_cell = static_cast<std::uint32_t>(first);
+    ctx.fresh_cell_end = static_cast<std::uint32_t>(first + cell_chunk);
+    have = ctx.free_cells.count + cell_chunk;
+  }
+}
+
 CellId Triangulation::Impl::alloc_cell(OpContext& ctx) {
   CellId c;
   if (ctx.free_cells.head != no_index) {
@@ -56,18 +94,21 @@ CellId Triangulation::Impl::alloc_cell(OpContext& ctx) {
     ctx.free_cells.head = cells[c].n[0];
     if (--ctx.free_cells.count == 0) ctx.free_cells.tail = no_index;
   } else {
-    if (ctx.fresh_cell == ctx.fresh_cell_end) {
-      std::size_t first = cells.grow(cell_chunk);
-      marks.ensure_size(first + cell_chunk);
-      for (std::size_t i = first; i < first + cell_chunk; ++i) cells[i].v[0] = no_vertex;  // not live yet
-      ctx.fresh_cell = static_cast<std::uint32_t>(first);
-      ctx.fresh_cell_end = static_cast<std::uint32_t>(first + cell_chunk);
-    }
+    if (ctx.fresh_cell == ctx.fresh_cell_end) reserve_cells(ctx, 1);
     c = ctx.fresh_cell++;
   }
-  marks[c] = 0;
+  renew(c);
   ++ctx.d_cells;
   return c;
+}
+
+void Triangulation::Impl::free_all_cells(OpContext& ctx) {
+  for (CellId c = 0; c < cells.size(); ++c) {
+    if (!cell_alive(c)) continue;
+    if (!cell_infinite(c)) --ctx.d_finite_cells;
+    note_destroyed(ctx, c);
+    free_cell(ctx, c);
+  }
 }
 
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
@@ -94,6 +135,7 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
       // Fresh records are all-zero (a free vertex) without construction; see
       // StableArray::grow. The small triangulation reuses its memory, and is
       // single-threaded, so it constructs.
+      PDT_FAULT_POINT("vertex chunk");
       std::size_t first = verts.grow(vertex_chunk, is_small);
       ctx.fresh_vertex = static_cast<std::uint32_t>(first);
       ctx.fresh_vertex_end = static_cast<std::uint32_t>(first + vertex_chunk);
@@ -111,7 +153,8 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   r.p = p;
   r.cell = no_cell;
   r.multiplicity = 1;
-  r.stamp.store((std::uint64_t{ctx.id} << 40) | ++ctx.vertex_counter, std::memory_order_release);
+  r.stamp.store(new_incarnation(ctx), std::memory_order_release);
+  ++ctx.insertions_made;
   ++ctx.d_vertices;
   ctx.last_vertex = v;
   return v;
@@ -169,9 +212,10 @@ void Triangulation::Impl::fold_counters(OpContext& ctx) {
 }
 
 void Triangulation::Impl::clear() {
-  // A small (per-removal) triangulation keeps its pages: it is cleared per operation.
+  // A small (per-removal) triangulation keeps its pages: it is cleared per
+  // operation. The tags keep their contents: cell incarnations go on counting.
   cells.clear(!is_small);
-  marks.clear(!is_small);
+  tags.clear(false);
   verts.clear(!is_small);
   verts.grow(1);
   verts[0].multiplicity = 1;

@@ -2,10 +2,12 @@
 // are triangulated in a per-context "small" triangulation, whose cells inside
 // the hole are sewn in. The symbolic perturbation guarantees that the small
 // triangulation contains every boundary facet of the hole.
+#include <algorithm>
 #include <cstring>
 #include <sstream>
 #include <stdexcept>
 
+#include "fault_injection.hpp"
 #include "pdt/error.hpp"
 #include "triangulation_impl.hpp"
 
@@ -53,23 +55,34 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
     out = RemoveResult::multiplicity_lowered;
     return OpStatus::done;
   }
-  if (dim.load(std::memory_order_acquire) < 3) {
-    if (ctx.locking) {
-      release_all(ctx);
-      return OpStatus::needs_global;
-    }
-    remove_flat(ctx, v);
-  } else {
-    OpStatus s = remove_3d(ctx, v);
+  const std::uint64_t incarnation = verts[v].stamp.load(std::memory_order_relaxed);
+  if (dim.load(std::memory_order_acquire) < 3 && ctx.locking) {
+    release_all(ctx);
+    return OpStatus::needs_global;
+  }
+  // Until the first change, a failure (a rollback, a failed allocation)
+  // releases what is held and changes nothing.
+  try {
+    const OpStatus s = dim.load(std::memory_order_acquire) < 3 ? remove_flat(ctx, v) : remove_3d(ctx, v);
     if (s != OpStatus::done) {
       release_all(ctx);
       return s;
     }
+  } catch (...) {
+    release_all(ctx);
+    throw;
   }
   ++ctx.stats.removals;
+  out = RemoveResult::removed;
+  try {
+    end_report(ctx, OpKind::remove, v, incarnation);
+  } catch (...) {
+    release_all(ctx);
+    end_op_counters(ctx);
+    throw;
+  }
   release_all(ctx);
   end_op_counters(ctx);
-  out = RemoveResult::removed;
   return OpStatus::done;
 }
 
@@ -134,25 +147,29 @@ OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
       if (survivors.offer(w, pt(w)) && survivors.dimension() == 3) break;
     if (survivors.dimension() < 3) {
       if (ctx.locking) return OpStatus::needs_global;
-      free_vertex(ctx, v);
-      drop_to_flat(ctx);
+      drop_to_flat(ctx, v);
       return OpStatus::done;
     }
   }
 
   // The small triangulation of the link's finite vertices (paper §2.2). The
   // perturbation makes it contain every facet of the hole's boundary.
-  if (!ctx.small) ctx.small = std::make_unique<Impl>(true);
+  if (!ctx.small) {
+    PDT_FAULT_POINT("link triangulation");
+    ctx.small = std::make_unique<Impl>(true);
+  }
   Impl& s = *ctx.small;
   s.clear();
   Inserted ignored;
   for (VertexId w : ctx.link) s.insert(*s.seq, pt(w), s.seq->last_vertex, ignored);
   ctx.stats.cells_touched_by_remove += static_cast<std::uint64_t>(s.n_cells.load());
 
-  if (s.dim < 3)
+  if (s.dim < 3) {
+    begin_report(ctx, hole.size(), hole.size());  // the last step that may fail
     fill_hole_flat_link(ctx, v);
-  else
+  } else {
     sew_link_triangulation(ctx, v);
+  }
 
   if (grid.slot_count) {
     std::size_t slot = grid.slot_of(pt(v));
@@ -173,7 +190,11 @@ void Triangulation::Impl::fill_hole_flat_link(OpContext& ctx, VertexId v) {
   const std::vector<CellId>& hole = ctx.hole;
   for (CellId h : hole) {
     if (cell_infinite(h)) continue;
+    // The cell changes: a new incarnation, so a handle to the old one is stale.
+    note_destroyed(ctx, h);
     cells[h].v[index_of(h, v)] = 0;
+    renew(h);
+    note_created(ctx, h);
     --ctx.d_finite_cells;
   }
   for (CellId h : hole) {
@@ -190,7 +211,10 @@ void Triangulation::Impl::fill_hole_flat_link(OpContext& ctx, VertexId v) {
     for (int j = 0; j < 4; ++j) set_vertex_cell(cells[h].v[j], h);
   }
   for (CellId h : hole)
-    if (index_of(h, v) >= 0) free_cell(ctx, h);
+    if (index_of(h, v) >= 0) {
+      note_destroyed(ctx, h);
+      free_cell(ctx, h);
+    }
 }
 
 void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
@@ -200,8 +224,10 @@ void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
   // Boundary facets of the hole, keyed by their unordered small-id triple.
   ctx.boundary.clear();
   detail::IdMap& facets = ctx.hole_facet_by_triple;
+  PDT_FAULT_POINT("hole facets");
   facets.reserve_for(hole.size());
   facets.clear();
+  ctx.boundary.reserve(hole.size());
   for (CellId h : hole) {
     int k = index_of(h, v);
     OpContext::BoundaryFacet bf;
@@ -234,13 +260,20 @@ void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
 
   // Flood the small triangulation from there, stopping at boundary facets:
   // the cells reached fill the hole exactly.
-  const std::uint64_t seen = sctx.next_stamp();
   std::vector<CellId>& inside = ctx.small_inside;
   inside.clear();
   std::size_t small_bound = s.cells.size();
+  PDT_FAULT_POINT("sewing scratch");
   if (ctx.small_facet_boundary.size() < 4 * small_bound) ctx.small_facet_boundary.resize(4 * small_bound);
   if (ctx.small_to_new.size() < small_bound) ctx.small_to_new.resize(small_bound);
-  s.marks[start] = seen;
+  if (ctx.small_seen.size() < small_bound) ctx.small_seen.resize(small_bound, 0);
+  inside.reserve(small_bound);
+  if (++ctx.small_generation == 0) {  // wrapped: forget every old generation
+    std::fill(ctx.small_seen.begin(), ctx.small_seen.end(), 0);
+    ctx.small_generation = 1;
+  }
+  const std::uint32_t seen = ctx.small_generation;
+  ctx.small_seen[start] = seen;
   inside.push_back(start);
   std::size_t matched = 0;
   for (std::size_t idx = 0; idx < inside.size(); ++idx) {
@@ -254,21 +287,27 @@ void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
         continue;
       }
       CellId nb = r.n[m] >> 2;
-      if (s.marks[nb] != seen) {
-        s.marks[nb] = seen;
+      if (ctx.small_seen[nb] != seen) {
+        ctx.small_seen[nb] = seen;
         inside.push_back(nb);
       }
     }
   }
   if (matched != ctx.boundary.size())
     throw std::logic_error("pdt: removal: the link triangulation does not match the hole");
+  reserve_cells(ctx, inside.size());
+  begin_report(ctx, inside.size(), hole.size());  // the last step that may fail
 
   // Sew: hole cells out, the inside small cells in, with big vertex ids.
   for (CellId h : hole) {
     if (!cell_infinite(h)) --ctx.d_finite_cells;
+    note_destroyed(ctx, h);
     free_cell(ctx, h);
   }
-  for (CellId sc : inside) ctx.small_to_new[sc] = alloc_cell(ctx);
+  for (CellId sc : inside) {
+    ctx.small_to_new[sc] = alloc_cell(ctx);
+    note_created(ctx, ctx.small_to_new[sc]);
+  }
   for (CellId sc : inside) {
     CellId nc = ctx.small_to_new[sc];
     const CellRec& r = s.cells[sc];

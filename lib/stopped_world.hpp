@@ -1,18 +1,22 @@
 #pragma once
-// The stopped world: operations that cannot run under vertex locks (those
-// that change the dimension) and the jump grid's regrowth run while no other
-// worker is inside an operation.
+// The stopped world: what cannot run under vertex locks (a change of
+// dimension, an operation that escalated, the jump grid's regrowth) runs
+// while no other worker is inside an operation.
 //
 // Protocol (all seq_cst): a worker announces in_op[i] = true, then checks
-// `stopped`; if set it withdraws and waits. A stopper takes the mutex, sets
-// `stopped`, then waits until every other in_op is false. So once try_stop
-// returns true, no other worker is inside an operation or can enter one
-// until restart().
-// Invariant: stopped => the mutex is held by the stopper.
+// `stopped`; if it is set, the worker withdraws (in_op[i] = false) and
+// suspends until restart() resumes it: it does not spin. A stopper takes the
+// mutex, sets `stopped`, then waits until every other in_op is false (each is
+// at most one operation away). So once try_stop returns true, no other worker
+// is inside an operation or can enter one until restart().
+// Invariants: stopped => the mutex is held by the stopper; a waiter is
+// registered only while stopped (both under waiters_mutex_).
 #include <atomic>
+#include <coroutine>
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <vector>
 
 namespace pdt::detail {
 
@@ -20,32 +24,53 @@ class StoppedWorld {
  public:
   explicit StoppedWorld(unsigned workers) : in_op_(std::make_unique<Flag[]>(workers)), workers_(workers) {}
 
-  // Worker i enters an operation, waiting while the world is stopped.
-  void enter(unsigned i) {
+  bool stopped() const { return stopped_.load(std::memory_order_seq_cst); }
+  // Worker i enters an operation: false (and not entered) while the world is stopped.
+  bool enter(unsigned i) {
     std::atomic<bool>& mine = in_op_[i].value;
     mine.store(true, std::memory_order_seq_cst);
-    while (stopped_.load(std::memory_order_seq_cst)) {
-      mine.store(false, std::memory_order_seq_cst);
-      while (stopped_.load(std::memory_order_acquire)) std::this_thread::yield();
-      mine.store(true, std::memory_order_seq_cst);
-    }
+    if (!stopped_.load(std::memory_order_seq_cst)) return true;
+    mine.store(false, std::memory_order_seq_cst);
+    return false;
   }
   void leave(unsigned i) { in_op_[i].value.store(false, std::memory_order_seq_cst); }
 
+  // Registers h to be resumed (through `resume`) at the next restart; false
+  // when the world is no longer stopped (then just go on).
+  bool wait(std::coroutine_handle<> h) {
+    std::lock_guard lock(waiters_mutex_);
+    if (!stopped_.load(std::memory_order_seq_cst)) return false;
+    waiters_.push_back(h);
+    return true;
+  }
+
   // Worker i (not inside an operation) stops the world: true when it now runs
-  // alone; false when another worker holds the world (retry later).
+  // alone; false when another worker holds the world (retry later). The
+  // waiters vector has room for every worker, so registering never allocates.
   bool try_stop(unsigned i, std::unique_lock<std::mutex>& lock) {
     lock = std::unique_lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return false;
-    stopped_.store(true, std::memory_order_seq_cst);
+    {
+      std::lock_guard w(waiters_mutex_);
+      waiters_.reserve(workers_);
+      stopped_.store(true, std::memory_order_seq_cst);
+    }
     for (unsigned k = 0; k < workers_; ++k)
       if (k != i)
         while (in_op_[k].value.load(std::memory_order_seq_cst)) std::this_thread::yield();
     return true;
   }
-  void restart(std::unique_lock<std::mutex>& lock) {
-    stopped_.store(false, std::memory_order_seq_cst);
+  // Restarts the world and resumes every waiter with resume(handle).
+  template <class Resume>
+  void restart(std::unique_lock<std::mutex>& lock, Resume resume) {
+    std::vector<std::coroutine_handle<>> woken;
+    {
+      std::lock_guard w(waiters_mutex_);
+      stopped_.store(false, std::memory_order_seq_cst);
+      woken.swap(waiters_);
+    }
     lock.unlock();
+    for (std::coroutine_handle<> h : woken) resume(h);
   }
 
  private:
@@ -56,6 +81,8 @@ class StoppedWorld {
   unsigned workers_;
   std::mutex mutex_;
   std::atomic<bool> stopped_{false};
+  std::mutex waiters_mutex_;
+  std::vector<std::coroutine_handle<>> waiters_;
 };
 
 }  // namespace pdt::detail

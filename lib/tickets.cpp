@@ -2,59 +2,218 @@
 
 #include <string>
 
+#include "fault_injection.hpp"
+#include "mix64.hpp"
 #include "pdt/error.hpp"
 
 namespace pdt::detail {
 
-std::uint64_t TicketTable::issue(std::span<const Point3> points) {
-  auto it = slots_.grow_by(points.size());
-  const auto first = static_cast<std::uint64_t>(it - slots_.begin());
-  for (std::size_t i = 0; i < points.size(); ++i) slots_[first + i].point = points[i];
+// ---------------------------------------------------------------------------
+// One shard: open addressing on mix64(ticket + 1), linear probing
+// ---------------------------------------------------------------------------
+TicketTable::Slot* TicketTable::Shard::find(std::uint64_t t) {
+  if (slots.empty()) return nullptr;
+  const std::size_t mask = slots.size() - 1;
+  for (std::size_t i = mix64(t + 1) & mask;; i = (i + 1) & mask) {
+    if (slots[i].key == t + 1) return &slots[i];
+    if (slots[i].key == 0) return nullptr;
+  }
+}
+
+const TicketTable::Slot* TicketTable::Shard::find(std::uint64_t t) const {
+  return const_cast<Shard*>(this)->find(t);
+}
+
+void TicketTable::Shard::reserve(std::size_t n) {
+  std::size_t want = 16;
+  while (want < 2 * n) want <<= 1;
+  if (want <= slots.size()) return;
+  PDT_FAULT_POINT("ticket shard");
+  std::vector<Slot> old(want);
+  old.swap(slots);
+  const std::size_t mask = slots.size() - 1;
+  for (const Slot& s : old) {
+    if (s.key == 0) continue;
+    std::size_t i = mix64(s.key) & mask;
+    while (slots[i].key != 0) i = (i + 1) & mask;
+    slots[i] = s;
+  }
+}
+
+void TicketTable::Shard::insert(std::uint64_t t) {
+  const std::size_t mask = slots.size() - 1;
+  std::size_t i = mix64(t + 1) & mask;
+  while (slots[i].key != 0) i = (i + 1) & mask;
+  slots[i] = Slot{};
+  slots[i].key = t + 1;
+  ++count;
+}
+
+void TicketTable::Shard::erase(Slot* s) {
+  const std::size_t mask = slots.size() - 1;
+  std::size_t hole = static_cast<std::size_t>(s - slots.data());
+  for (std::size_t i = (hole + 1) & mask; slots[i].key != 0; i = (i + 1) & mask) {
+    const std::size_t home = mix64(slots[i].key) & mask;
+    const bool stays = hole <= i ? (hole < home && home <= i) : (hole < home || home <= i);
+    if (stays) continue;
+    slots[hole] = slots[i];
+    hole = i;
+  }
+  slots[hole] = Slot{};
+  --count;
+}
+
+// ---------------------------------------------------------------------------
+// The table
+// ---------------------------------------------------------------------------
+void TicketTable::unknown(std::uint64_t t, const char* why) {
+  throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": " + why);
+}
+
+std::uint64_t TicketTable::issue(std::uint64_t n) {
+  // Tickets are consecutive per call: one issuer at a time reserves room in
+  // every shard it touches, then takes the numbers.
+  std::lock_guard issuing(issue_mutex_);
+  const std::uint64_t first = next_.load(std::memory_order_relaxed);
+  const std::uint64_t per_shard = n / shard_count + 1;
+  for (unsigned k = 0; k < shard_count && k < n; ++k) {
+    Shard& s = shards_[(first + k) % shard_count];
+    std::lock_guard lock(s.mutex);
+    s.reserve(s.count + per_shard);
+  }
+  for (std::uint64_t t = first; t < first + n; ++t) {
+    Shard& s = shard(t);
+    std::lock_guard lock(s.mutex);
+    s.insert(t);
+  }
+  live_.fetch_add(n, std::memory_order_relaxed);
+  next_.store(first + n, std::memory_order_release);
   return first;
 }
 
-void TicketTable::claim_undo(std::uint64_t t) {
-  if (t >= slots_.size())
-    throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": no such insertion was submitted");
-  if (slots_[t].undone.exchange(true))
-    throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": it was already undone");
+TicketView TicketTable::claim_undo(std::uint64_t t) {
+  if (t >= next_.load(std::memory_order_acquire)) unknown(t, "no such insertion was submitted");
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  Slot* slot = s.find(t);
+  if (!slot) unknown(t, "it was already undone, or its vertex was removed meanwhile");
+  if (slot->undone) unknown(t, "it was already undone");
+  if (slot->state == TicketState::failed) {
+    s.errors.erase(t);
+    s.erase(slot);
+    live_.fetch_sub(1, std::memory_order_relaxed);
+    unknown(t, "that insertion failed");
+  }
+  slot->undone = true;
+  return {slot->state, slot->vertex, slot->stamp};
+}
+
+void TicketTable::unclaim_undo(std::uint64_t t) {
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  if (Slot* slot = s.find(t)) slot->undone = false;
+}
+
+TicketView TicketTable::view(std::uint64_t t) const {
+  const Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  const Slot* slot = s.find(t);
+  if (!slot) return {TicketState::failed, no_vertex, 0};
+  return {slot->state, slot->vertex, slot->stamp};
+}
+
+OpRecord* TicketTable::park(std::uint64_t t, OpRecord* undo) {
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  Slot* slot = s.find(t);
+  if (!slot || slot->state != TicketState::pending) return undo;  // done meanwhile: run it now
+  slot->parked = undo;
+  return nullptr;
+}
+
+OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp) {
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  Slot* slot = s.find(t);
+  slot->state = TicketState::inserted;
+  slot->vertex = v;
+  slot->inserted = inserted;
+  slot->stamp = stamp;
+  OpRecord* undo = slot->parked;
+  slot->parked = nullptr;
+  return undo;
+}
+
+OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error) {
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  Slot* slot = s.find(t);
+  slot->state = TicketState::failed;
+  OpRecord* undo = slot->parked;
+  slot->parked = nullptr;
+  try {
+    s.errors[t] = std::move(error);
+  } catch (...) {
+    // No room to keep the error: insertion_result(t) will say it failed without it.
+  }
+  return undo;
+}
+
+void TicketTable::release(std::uint64_t t) {
+  Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  if (Slot* slot = s.find(t)) {
+    s.errors.erase(t);
+    s.erase(slot);
+    live_.fetch_sub(1, std::memory_order_relaxed);
+  }
 }
 
 InsertResult TicketTable::result(std::uint64_t t) const {
-  if (t >= slots_.size())
+  if (t >= next_.load(std::memory_order_acquire))
     throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) + " was never submitted");
-  const TicketSlot& slot = slots_[t];
-  switch (slot.state.load(std::memory_order_acquire)) {
-    case TicketState::inserted: return {slot.vertex, slot.inserted};
-    case TicketState::failed: std::rethrow_exception(slot.error);
+  const Shard& s = shard(t);
+  std::lock_guard lock(s.mutex);
+  const Slot* slot = s.find(t);
+  if (!slot)
+    throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) +
+                                                 " was released: it was undone, or its vertex was removed");
+  switch (slot->state) {
+    case TicketState::inserted: return {slot->vertex, slot->inserted, slot->stamp};
+    case TicketState::failed: {
+      auto it = s.errors.find(t);
+      if (it != s.errors.end()) std::rethrow_exception(it->second);
+      throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) + " failed");
+    }
     case TicketState::pending: break;
   }
   throw Error(ErrorCode::invalid_argument,
               "insertion " + std::to_string(t) + " has not finished; drain() first, or wait for its callback");
 }
 
-OpRecord* TicketTable::park(std::uint64_t t, OpRecord* undo) {
-  TicketSlot& slot = slots_[t];
-  slot.parked.store(undo, std::memory_order_seq_cst);
-  if (slot.state.load(std::memory_order_seq_cst) == TicketState::pending) return nullptr;
-  // Done meanwhile: take it back, unless the completion already did.
-  return slot.parked.exchange(nullptr, std::memory_order_seq_cst);
-}
-
-OpRecord* TicketTable::finish_inserted(std::uint64_t t, InsertResult r, std::uint64_t stamp) {
-  TicketSlot& slot = slots_[t];
-  slot.vertex = r.vertex;
-  slot.inserted = r.inserted;
-  slot.stamp = stamp;
-  slot.state.store(TicketState::inserted, std::memory_order_seq_cst);
-  return slot.parked.exchange(nullptr, std::memory_order_seq_cst);
-}
-
-OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error) {
-  TicketSlot& slot = slots_[t];
-  slot.error = std::move(error);
-  slot.state.store(TicketState::failed, std::memory_order_seq_cst);
-  return slot.parked.exchange(nullptr, std::memory_order_seq_cst);
+void TicketTable::sweep_if_large(const StableArray<VertexRec>& verts, std::uint64_t live_vertices) {
+  const std::uint64_t live_now = live_.load(std::memory_order_relaxed);
+  if (live_now < sweep_at_.load(std::memory_order_relaxed)) return;
+  std::uint64_t erased = 0;
+  for (Shard& s : shards_) {
+    std::lock_guard lock(s.mutex);
+    for (std::size_t i = 0; i < s.slots.size();) {
+      Slot& slot = s.slots[i];
+      // A done insertion whose vertex incarnation is gone can no longer be
+      // undone by ticket (an undo claimed for it will fail on its own).
+      const bool dead = slot.key != 0 && slot.state == TicketState::inserted && !slot.undone &&
+                        verts[slot.vertex].stamp.load(std::memory_order_relaxed) != slot.stamp;
+      if (dead) {
+        s.erase(&slot);  // the next entry may have shifted into i: look at i again
+        ++erased;
+      } else {
+        ++i;
+      }
+    }
+  }
+  live_.fetch_sub(erased, std::memory_order_relaxed);
+  // Next sweep when the table doubles past what is live now (amortised O(1)).
+  sweep_at_.store(2 * std::max<std::uint64_t>(live_now - erased, live_vertices) + (1 << 16), std::memory_order_relaxed);
 }
 
 }  // namespace pdt::detail

@@ -1,61 +1,100 @@
 #pragma once
-// Tickets: insertion t of an engine is ticket t. Its slot records the
-// insertion's outcome once it is done, so that remove_insertion(t) can find
-// the vertex to remove, and lets an undo that arrives first wait for it.
+// Tickets: insertion t of an engine is ticket t. While it can still be used,
+// its slot records the insertion's state and, once it is done, the vertex
+// incarnation it made, so that remove_insertion(t) finds the vertex; an undo
+// that arrives before the insertion is done waits (parks) on the slot.
 //
-// The park handshake (an undo before its insertion is done) is a Dekker
-// handshake between state and parked: the undo stores parked then reads
-// state; the insertion stores state then exchanges parked; all seq_cst. So
-// at least one side sees the other, and `exchange` decides who re-queues.
-#include <oneapi/tbb/concurrent_vector.h>
-
+// Memory follows what can still be referenced, not what was ever submitted:
+// a slot is erased when its undo has run, and slots whose vertex is gone
+// (removed by handle or id) are swept once they outnumber the live vertices.
+// The slots live in 64 shards (ticket mod 64), each an open-addressing table
+// with backward-shift deletion under its own mutex.
+// Invariants: a slot exists for every ticket issued and not released;
+// pending slots are never swept; a parked undo exists only on a pending slot.
 #include <atomic>
 #include <cstdint>
 #include <exception>
-#include <span>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
 
 #include "op_record.hpp"
+#include "storage.hpp"
+#include "stable_array.hpp"
 
 namespace pdt::detail {
 
-enum class TicketState : int { pending, inserted, failed };
+enum class TicketState : std::uint8_t { pending, inserted, failed };
 
-struct TicketSlot {
-  std::atomic<TicketState> state{TicketState::pending};
-  std::atomic<bool> undone{false};  // an undo was claimed (submitted) for it
-  std::atomic<OpRecord*> parked{nullptr};  // an undo waiting for the insertion
-  VertexId vertex = no_vertex;  // written before state becomes inserted
-  bool inserted = false;        // same
-  std::uint64_t stamp = 0;      // same: the vertex incarnation
-  std::exception_ptr error;     // written before state becomes failed
-  Point3 point;                 // written when issued: where the undo is routed
+// What an undo needs to know of its insertion.
+struct TicketView {
+  TicketState state = TicketState::pending;
+  VertexId vertex = no_vertex;
+  std::uint64_t stamp = 0;
 };
 
 class TicketTable {
  public:
-  // Issues tickets for points (one each, consecutive); returns the first.
-  std::uint64_t issue(std::span<const Point3> points);
-  std::uint64_t size() const { return slots_.size(); }
-  TicketSlot& operator[](std::uint64_t t) { return slots_[t]; }
-  const TicketSlot& operator[](std::uint64_t t) const { return slots_[t]; }
+  // Issues n consecutive tickets; returns the first. Throws std::bad_alloc
+  // (and issues none) if a shard cannot grow.
+  std::uint64_t issue(std::uint64_t n);
+  std::uint64_t issued() const { return next_.load(std::memory_order_relaxed); }
+  std::uint64_t live() const { return live_.load(std::memory_order_relaxed); }
 
-  // Marks insertion t as undone; throws pdt::Error(unknown_vertex) for a
-  // ticket never issued or already undone. unclaim gives a claim back.
-  void claim_undo(std::uint64_t t);
-  void unclaim_undo(std::uint64_t t) { slots_[t].undone.store(false); }
-  // The outcome of a finished insertion (rethrows its error); throws
-  // pdt::Error(invalid_argument) if t was never issued or is not finished.
-  InsertResult result(std::uint64_t t) const;
-
+  // Claims the undo of t; throws pdt::Error(unknown_vertex) for a ticket
+  // never issued, released, already undone, or whose insertion failed (that
+  // one is then released). unclaim gives a claim back.
+  TicketView claim_undo(std::uint64_t t);
+  void unclaim_undo(std::uint64_t t);
+  // The state of t for an undo about to run (t was claimed, so it exists).
+  TicketView view(std::uint64_t t) const;
   // An undo of t found it pending: parks it. Returns the undo back when the
   // insertion finished meanwhile (the caller runs it), else nullptr.
   OpRecord* park(std::uint64_t t, OpRecord* undo);
   // Records insertion t's outcome; returns an undo parked on it, to re-queue.
-  OpRecord* finish_inserted(std::uint64_t t, InsertResult r, std::uint64_t stamp);
+  OpRecord* finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp);
   OpRecord* finish_failed(std::uint64_t t, std::exception_ptr error);
+  // t's undo ran: its slot goes.
+  void release(std::uint64_t t);
+  // The outcome of a finished insertion (rethrows its error); throws
+  // pdt::Error(invalid_argument) if t was never issued, is not finished, or
+  // was released.
+  InsertResult result(std::uint64_t t) const;
+  // Erases the done slots whose vertex incarnation is gone, if the table has
+  // grown well past `live_vertices`.
+  void sweep_if_large(const StableArray<VertexRec>& verts, std::uint64_t live_vertices);
 
  private:
-  tbb::concurrent_vector<TicketSlot> slots_;
+  struct Slot {
+    std::uint64_t key = 0;  // ticket + 1; 0 = empty
+    std::uint64_t stamp = 0;
+    OpRecord* parked = nullptr;
+    VertexId vertex = no_vertex;
+    TicketState state = TicketState::pending;
+    bool inserted = false;
+    bool undone = false;
+  };
+  struct alignas(64) Shard {
+    mutable std::mutex mutex;
+    std::vector<Slot> slots;  // power of two (or empty), at most half full
+    std::size_t count = 0;
+    std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
+    Slot* find(std::uint64_t t);
+    const Slot* find(std::uint64_t t) const;
+    void insert(std::uint64_t t);  // room must exist
+    void reserve(std::size_t n);
+    void erase(Slot* s);
+  };
+  static constexpr unsigned shard_count = 64;
+  Shard& shard(std::uint64_t t) { return shards_[t % shard_count]; }
+  const Shard& shard(std::uint64_t t) const { return shards_[t % shard_count]; }
+  [[noreturn]] static void unknown(std::uint64_t t, const char* why);
+  Shard shards_[shard_count];
+  std::atomic<std::uint64_t> next_{0};
+  std::atomic<std::uint64_t> live_{0};
+  std::atomic<std::uint64_t> sweep_at_{1 << 16};
+  std::mutex issue_mutex_;
 };
 
 }  // namespace pdt::detail

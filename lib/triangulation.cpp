@@ -14,14 +14,45 @@ namespace {
 using detail::require_finite;
 using detail::to_kpoint;
 
+// The rule every mutator checks: an attached engine owns the triangulation.
+void require_detached(const Triangulation::Impl& m, const char* what) {
+  if (m.engine.load(std::memory_order_acquire) == nullptr) return;
+  throw Error(ErrorCode::invalid_argument,
+              std::string("Triangulation::") + what +
+                  " while an Engine is attached: an engine owns its triangulation from construction to "
+                  "destruction; submit through the engine, or destroy it first");
+}
+
+// The scratch of const queries: one per thread, so any number of threads may
+// query at once (no lock is taken: the triangulation must be quiescent).
+detail::OpContext& query_context() {
+  thread_local detail::OpContext ctx(0, false);
+  return ctx;
+}
+
 }  // namespace
 
 Triangulation::Triangulation() : impl_(std::make_unique<Impl>()) {}
 Triangulation::~Triangulation() = default;
-Triangulation::Triangulation(Triangulation&&) noexcept = default;
-Triangulation& Triangulation::operator=(Triangulation&&) noexcept = default;
+
+Triangulation::Triangulation(Triangulation&& o) {
+  require_detached(*o.impl_, "move");
+  impl_ = std::move(o.impl_);
+  o.impl_ = std::make_unique<Impl>();  // a moved-from triangulation is empty and usable
+}
+
+Triangulation& Triangulation::operator=(Triangulation&& o) {
+  if (this == &o) return *this;
+  require_detached(*impl_, "move assignment");
+  require_detached(*o.impl_, "move assignment");
+  auto fresh = std::make_unique<Impl>();
+  impl_ = std::move(o.impl_);
+  o.impl_ = std::move(fresh);
+  return *this;
+}
 
 InsertResult Triangulation::insert(const Point3& p, Hint hint) {
+  require_detached(*impl_, "insert");
   require_finite(p);
   Impl& m = *impl_;
   VertexId start = hint.vertex;
@@ -34,6 +65,7 @@ InsertResult Triangulation::insert(const Point3& p, Hint hint) {
 }
 
 std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> points) {
+  require_detached(*impl_, "insert_batch");
   for (const Point3& p : points) require_finite(p);
   if (points.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument,
@@ -52,12 +84,35 @@ std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> po
 }
 
 RemoveResult Triangulation::remove(VertexId v) {
+  require_detached(*impl_, "remove");
   RemoveResult out = RemoveResult::removed;
   impl_->remove(*impl_->seq, v, 0, out);
   return out;
 }
 
-void Triangulation::clear() { impl_->clear(); }
+RemoveResult Triangulation::remove(VertexHandle v) {
+  require_detached(*impl_, "remove");
+  if (v.incarnation == 0)
+    throw Error(ErrorCode::unknown_vertex,
+                "cannot remove vertex " + std::to_string(v.id) + ": the handle has no incarnation (an empty handle)");
+  RemoveResult out = RemoveResult::removed;
+  impl_->remove(*impl_->seq, v.id, v.incarnation, out);
+  return out;
+}
+
+void Triangulation::clear() {
+  require_detached(*impl_, "clear");
+  impl_->clear();
+}
+
+void Triangulation::set_change_hook(ChangeHook hook, bool report_destroyed) {
+  require_detached(*impl_, "set_change_hook");
+  Impl& m = *impl_;
+  m.hook = std::move(hook);
+  m.seq->hook = m.hook ? &m.hook : nullptr;
+  m.report_destroyed = report_destroyed;
+  m.seq->report_destroyed = report_destroyed;
+}
 
 int Triangulation::dimension() const { return impl_->dim.load(); }
 std::size_t Triangulation::number_of_vertices() const { return static_cast<std::size_t>(impl_->n_vertices.load()); }
@@ -78,73 +133,35 @@ std::uint32_t Triangulation::multiplicity(VertexId v) const {
 
 LocateResult Triangulation::locate(const Point3& p, Hint hint) const {
   require_finite(p);
-  const Impl& m = *impl_;
   LocateResult out;
-  if (m.dim < 3) {
-    VertexId w = m.find_flat(to_kpoint(p));
-    if (w != no_vertex) out.vertex = w, out.kind = LocateKind::on_vertex;
-    return out;
-  }
-  detail::KPoint q = to_kpoint(p);
-  detail::OpContext& ctx = *m.seq;
-  VertexId s = m.start_vertex(ctx, q, hint.vertex);
-  CellId start = hint.cell != no_cell && m.cell_alive(hint.cell) ? hint.cell : m.verts[s].cell;
-  if (int k = m.index_of(start, 0); k >= 0) start = m.cells[start].n[k] >> 2;
-  bool outside = false;
-  CellId c = m.walk(ctx, q, start, &outside);
-  out.cell = c;
-  if (outside) {
-    out.kind = LocateKind::outside_hull;
-    return out;
-  }
-  const auto& cr = m.cells[c];
-  int zeros = 0;
-  for (int i = 0; i < 4; ++i) {
-    const detail::KPoint* a[4] = {&m.pt(cr.v[0]), &m.pt(cr.v[1]), &m.pt(cr.v[2]), &m.pt(cr.v[3])};
-    a[i] = &q;
-    if (detail::orient(*a[0], *a[1], *a[2], *a[3]) == 0) ++zeros;
-    if (m.pt(cr.v[i]) == q) out.vertex = cr.v[i];
-  }
-  out.kind = zeros == 0 ? LocateKind::in_cell : zeros == 1 ? LocateKind::on_facet
-           : zeros == 2 ? LocateKind::on_edge : LocateKind::on_vertex;
+  impl_->locate(query_context(), to_kpoint(p), hint.vertex, hint.cell, out);  // not locking: always done
   return out;
 }
 
 VertexId Triangulation::nearest_vertex(const Point3& p) const {
   require_finite(p);
-  const Impl& m = *impl_;
-  detail::KPoint q = to_kpoint(p);
-  auto closer = [&](VertexId a, VertexId b) {  // a strictly closer to q than b
-    return b == no_vertex || CGAL::compare_distance_to_point(q, m.pt(a), m.pt(b)) == CGAL::SMALLER;
-  };
-  VertexId best = no_vertex;
-  if (m.dim < 3) {
-    for (VertexId w : m.flat)
-      if (closer(w, best)) best = w;
-    return best;
-  }
-  detail::OpContext& ctx = *m.seq;
-  bool outside = false;
-  CellId c = m.walk(ctx, q, m.finite_cell_of(m.start_vertex(ctx, q, no_vertex)), &outside);
-  for (int i = 0; i < 4; ++i) {
-    VertexId w = m.cells[c].v[i];
-    if (w != 0 && closer(w, best)) best = w;
-  }
-  // Greedy descent on the Delaunay graph ends at the nearest vertex: a vertex
-  // with no strictly closer neighbour is a nearest one (its Voronoi cell holds q).
-  std::vector<CellId> star;
-  Impl& mm = const_cast<Impl&>(m);
-  while (true) {
-    mm.collect_star(ctx, best, star);
-    VertexId next = best;
-    for (CellId sc : star)
-      for (int i = 0; i < 4; ++i) {
-        VertexId w = m.cells[sc].v[i];
-        if (w != 0 && closer(w, next)) next = w;
-      }
-    if (next == best) return best;
-    best = next;
-  }
+  VertexId out = no_vertex;
+  impl_->nearest_vertex(query_context(), to_kpoint(p), out);  // not locking: always done
+  return out;
+}
+
+bool Triangulation::is_vertex(VertexHandle v) const {
+  return impl_->vertex_alive(v.id) && v.incarnation != 0 &&
+         impl_->verts[v.id].stamp.load(std::memory_order_relaxed) == v.incarnation;
+}
+
+VertexHandle Triangulation::vertex_handle(VertexId v) const {
+  return {v, impl_->vertex_alive(v) ? impl_->verts[v].stamp.load(std::memory_order_relaxed) : 0};
+}
+
+CellHandle Triangulation::cell_handle(CellId c) const { return impl_->handle_of(c); }
+
+std::optional<CellView> Triangulation::cell(CellHandle h) const {
+  bool alive = false;
+  CellView view;
+  impl_->find_cell(query_context(), h, &alive, &view);  // not locking: always done
+  if (!alive) return std::nullopt;
+  return view;
 }
 
 std::vector<std::array<VertexId, 4>> Triangulation::finite_cells() const {
@@ -180,7 +197,7 @@ const TriangulationStats& Triangulation::stats() const { return impl_->seq->stat
 
 std::size_t Triangulation::memory_bytes() const {
   const Impl& m = *impl_;
-  return m.cells.size() * (sizeof(detail::CellRec) + sizeof(std::uint32_t)) +
+  return m.cells.size() * (sizeof(detail::CellRec) + sizeof(std::uint32_t)) +  // records and tags
          m.verts.size() * sizeof(detail::VertexRec) + m.grid.slot_count * sizeof(VertexId);
 }
 

@@ -12,12 +12,19 @@
 //
 // Storage (see storage.hpp for the record encodings):
 //   cells[c], verts[v] index-based, in StableArrays, so ids never move.
-//   marks[c]  visit stamp of the last conflict-zone search that touched c. A
-//             stamp is (context id << 48 | counter), so searches of different
-//             threads, or earlier ones of the same thread, never match.
-//             Only a thread holding a facet of c exclusively writes marks[c]
-//             (two such threads would share a vertex), so a search owns the
-//             marks it reads.
+//   tags[c]   incarnation << 2 | mark. The incarnation counts the allocations
+//             of id c over the triangulation's whole life (clear() keeps it),
+//             so (c, incarnation) names one cell ever. The mark (1 in, 2 out)
+//             is set by a conflict-zone search on the cells it meets and
+//             cleared before the search returns, so outside a search every
+//             mark is 0 (I7). Only a thread holding a facet of c exclusively
+//             writes c's mark (two such threads would share a vertex), so a
+//             search owns the marks it reads; the word is atomic (relaxed)
+//             because a reader holding another vertex of c may read the
+//             incarnation meanwhile.
+//   Vertex incarnations (VertexRec.stamp) come in blocks from a life-long
+//   source, and context ids (lock owners) from a life-long counter, so
+//   neither repeats however many engines come and go.
 //
 // Invariants while dimension() == 3 (checked by validate()):
 //   I1 a live cell has 4 distinct live vertices; a free cell has v[0] == no_vertex
@@ -33,6 +40,7 @@
 //   I5 every facet is locally Delaunay under the symbolic perturbation, and the
 //      hull is convex (the infinite cells pass the same test).
 //   I6 V - E + F - C = 0 counting the infinite vertex (a triangulated 3-sphere).
+//   I7 no cell is marked.
 // While dimension() < 3 there is no cell: the live vertices are listed in
 // `flat`, verts[v].cell holds v's position in `flat`, and `basis` holds
 // dimension()+1 affinely independent vertices.
@@ -55,16 +63,23 @@
 // never reads results out of a context. Operations that change the dimension
 // report needs_global, and the engine reruns them with the world stopped in
 // the sequential context. While an engine drives the triangulation,
-// grid_growth says so and the engine, not the kernel, regrows the jump grid.
+// grid_growth says so and the engine, not the kernel, regrows the jump grid;
+// `engine` names it, and the public mutators refuse to run.
+//
+// Exception safety. An operation obtains everything it needs (pool cells, map
+// room, report room, the vertex) before its first change, so an allocation
+// failure leaves the triangulation as it was; a global step (build_3d,
+// drop_to_flat) reserves first or restores the state it started from.
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include "affine_basis.hpp"
+#include "flat_index.hpp"
 #include "jump_grid.hpp"
 #include "op_context.hpp"
 #include "pdt/triangulation.hpp"
@@ -86,8 +101,9 @@ struct Triangulation::Impl {
 
   // -- storage ---------------------------------------------------------------
   detail::StableArray<CellRec> cells;
-  detail::StableArray<std::uint64_t> marks;
+  detail::StableArray<std::atomic<std::uint32_t>> tags;
   detail::StableArray<VertexRec> verts;
+  static constexpr std::uint32_t mark_in = 1, mark_out = 2, mark_bits = 3;
 
   std::atomic<int> dim{-1};
   // Totals; exact whenever no operation is running and every engine worker
@@ -96,7 +112,7 @@ struct Triangulation::Impl {
 
   // dimension < 3
   std::vector<VertexId> flat;
-  std::unordered_map<std::uint64_t, std::vector<VertexId>> flat_index;  // hash(point) -> vertices
+  detail::FlatIndex flat_index;  // the flat vertices by point
   detail::AffineBasis basis;
 
   const bool is_small;  // a removal's scratch triangulation: no jump grid
@@ -105,6 +121,15 @@ struct Triangulation::Impl {
   enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
   std::unique_ptr<OpContext> seq;  // the context of single-threaded calls
   std::atomic<VertexId> recent_vertex{no_vertex};  // some recently inserted vertex (a walk start)
+  ChangeHook hook;                 // Triangulation::set_change_hook's, for seq
+  bool report_destroyed = false;
+  std::atomic<const void*> engine{nullptr};  // the attached engine, if any
+
+  // Life-long sources (clear() keeps them).
+  std::atomic<std::uint32_t> next_context_id{2};  // 1 is seq
+  std::atomic<std::uint64_t> next_incarnation_block{0};
+  std::uint32_t new_context_id();
+  std::uint64_t new_incarnation(OpContext& ctx);
 
   // -- primitives ------------------------------------------------------------
   bool cell_alive(CellId c) const { return c < cells.size() && cells[c].v[0] != no_vertex; }
@@ -114,6 +139,18 @@ struct Triangulation::Impl {
   }
   bool vertex_alive(VertexId v) const { return v != 0 && v < verts.size() && verts[v].multiplicity > 0; }
   const KPoint& pt(VertexId v) const { return verts[v].p; }
+  std::uint32_t mark(CellId c) const { return tags[c].load(std::memory_order_relaxed) & mark_bits; }
+  void set_mark(CellId c, std::uint32_t m) {
+    const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
+    tags[c].store((t & ~mark_bits) | m, std::memory_order_relaxed);
+  }
+  std::uint32_t incarnation(CellId c) const { return tags[c].load(std::memory_order_relaxed) >> 2; }
+  // A new incarnation of c, unmarked (c is being (re)made; its writer holds it).
+  void renew(CellId c) {
+    const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
+    tags[c].store(((t >> 2) + 1) << 2, std::memory_order_relaxed);
+  }
+  CellHandle handle_of(CellId c) const;
   int index_of(CellId c, VertexId v) const {
     const VertexId* cv = cells[c].v;
     return cv[0] == v ? 0 : cv[1] == v ? 1 : cv[2] == v ? 2 : cv[3] == v ? 3 : -1;
@@ -129,6 +166,10 @@ struct Triangulation::Impl {
   // -- pools (pools.cpp) --------------------------------------------------------
   CellId alloc_cell(OpContext& ctx);
   void free_cell(OpContext& ctx, CellId c);
+  // Makes sure the next n alloc_cell calls of ctx cannot fail (they then take
+  // no chunk from the shared arrays). Throws std::bad_alloc, changing nothing.
+  void reserve_cells(OpContext& ctx, std::size_t n);
+  void free_all_cells(OpContext& ctx);  // every live cell (the world is stopped)
   VertexId alloc_vertex(OpContext& ctx, const KPoint& p);
   void free_vertex(OpContext& ctx, VertexId v);
   // Gives a context's pooled ids back to another context (engine shutdown).
@@ -136,6 +177,20 @@ struct Triangulation::Impl {
   void fold_counters(OpContext& ctx);
   void end_op_counters(OpContext& ctx);  // folds now, or later for an engine worker
   void clear();
+
+  // -- change reporting (changes.cpp) ---------------------------------------------
+  // Before an operation's first change: starts recording if ctx has a hook and
+  // reserves room for the cells it will make and delete (may throw, changing
+  // nothing), so that noting them never allocates.
+  void begin_report(OpContext& ctx, std::size_t cells_made, std::size_t cells_unmade);
+  void note_created(OpContext& ctx, CellId c) {
+    if (ctx.recording) ctx.created.push_back(c);
+  }
+  void note_destroyed(OpContext& ctx, CellId c) {
+    if (ctx.recording && ctx.report_destroyed) ctx.destroyed.push_back(handle_of(c));
+  }
+  // After the changes, while their cells are held: calls the hook.
+  void end_report(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation);
 
   // -- locks (vertex_locks.cpp; no-ops when !ctx.locking) -----------------------
   bool lock_shared(OpContext& ctx, VertexId v);
@@ -157,12 +212,25 @@ struct Triangulation::Impl {
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
   void grid_rebuild(std::size_t slots = 0);
 
+  // Read-only queries in a context (its locks, its scratch). A locking
+  // context takes shared locks and reports rollback on a conflict (holding
+  // nothing then); otherwise they are the const queries of Triangulation.
+  OpStatus locate(OpContext& ctx, const KPoint& p, VertexId hint, CellId hint_cell, LocateResult& out) const;
+  OpStatus nearest_vertex(OpContext& ctx, const KPoint& p, VertexId& out) const;
+  // The cell of h if live (*view filled) or dead (*alive = false). Holding
+  // h.anchor shared pins every cell around it, so nothing else is locked.
+  // while_held, if given, runs on the cell (if alive) before the anchor is released.
+  OpStatus find_cell(OpContext& ctx, CellHandle h, bool* alive, CellView* view,
+                     const std::function<void(const CellView&)>* while_held = nullptr) const;
+  void fill_view(CellId c, CellView& out) const;
+
   // -- insertion (insertion.cpp) --------------------------------------------------
   struct Inserted {
     InsertResult result;
     std::uint64_t stamp = 0;  // the incarnation of result.vertex
   };
   OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out);
+  // Marks are cleared before it returns, whatever it returns.
   OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0);
   void cone_from_vertex(OpContext& ctx, VertexId v);
 
@@ -177,12 +245,13 @@ struct Triangulation::Impl {
 
   // -- dimension < 3 (flat_state.cpp; single-threaded only) ----------------------
   InsertResult insert_flat(OpContext& ctx, const KPoint& p);
-  void remove_flat(OpContext& ctx, VertexId v);
+  OpStatus remove_flat(OpContext& ctx, VertexId v);  // always done
   void recompute_basis();
   void build_3d(OpContext& ctx, VertexId apex);
-  void drop_to_flat(OpContext& ctx);
-  static std::uint64_t point_hash(const KPoint& p);
-  VertexId find_flat(const KPoint& p) const;
+  // Removes v, whose removal leaves a coplanar set: every cell goes, the
+  // survivors become the flat list. Reserves first: changes nothing if it throws.
+  void drop_to_flat(OpContext& ctx, VertexId v);
+  VertexId find_flat(const KPoint& p) const { return flat_index.find(p, verts); }
 
   bool validate(std::string* why) const;  // validate.cpp
 };

@@ -95,6 +95,8 @@ bool Triangulation::Impl::validate(std::string* why) const {
     // I3
     if (finite && detail::orient(pt(r.v[0]), pt(r.v[1]), pt(r.v[2]), pt(r.v[3])) <= 0)
       return fail(f << "cell " << c << " is not positively oriented");
+    // I7
+    if (mark(c) != 0) return fail(f << "cell " << c << " is still marked by a conflict-zone search");
   }
   if (live_cells != n_cells) return fail(f << "cell count " << n_cells << " but " << live_cells << " live cells");
   if (finite_cells != n_finite_cells)

@@ -5,9 +5,11 @@
 // A context records what it holds (held_shared, held_exclusive) so that it
 // can release everything at once, on success or on a rollback. With a
 // non-locking context (the sequential triangulation) every call succeeds.
-// The infinite vertex is never locked.
+// The infinite vertex is never locked. Room in the record is made before the
+// lock word changes, so a failed allocation never leaves a lock nobody holds.
 #include <algorithm>
 
+#include "fault_injection.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -21,6 +23,10 @@ bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
   if (cur == -static_cast<std::int32_t>(ctx.id)) return true;
   for (VertexId h : ctx.held_shared)
     if (h == v) return true;
+  if (ctx.held_shared.size() == ctx.held_shared.capacity()) {
+    PDT_FAULT_POINT("lock record");
+    ctx.held_shared.reserve(2 * ctx.held_shared.capacity() + 16);
+  }
   while (cur >= 0)
     if (w.compare_exchange_weak(cur, cur + 1, std::memory_order_acquire, std::memory_order_relaxed)) {
       ctx.held_shared.push_back(v);
@@ -35,6 +41,10 @@ bool Triangulation::Impl::lock_exclusive(OpContext& ctx, VertexId v) {
   const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
   std::int32_t cur = w.load(std::memory_order_relaxed);
   if (cur == mine) return true;
+  if (ctx.held_exclusive.size() == ctx.held_exclusive.capacity()) {
+    PDT_FAULT_POINT("lock record");
+    ctx.held_exclusive.reserve(2 * ctx.held_exclusive.capacity() + 16);
+  }
   auto it = std::find(ctx.held_shared.begin(), ctx.held_shared.end(), v);
   std::int32_t expect = it != ctx.held_shared.end() ? 1 : 0;  // upgrade: we must be the only reader
   if (!w.compare_exchange_strong(expect, mine, std::memory_order_acquire, std::memory_order_relaxed)) return false;

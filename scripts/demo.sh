@@ -13,18 +13,9 @@ threads=${PDT_DEMO_THREADS:-0}
 out_dir=${PDT_DEMO_DIR:-build/demo}
 stream="$out_dir/uniform-${points}-interleaved.opsb"
 
-current_step=""
-# Name the step that failed: with set -e the script would otherwise just stop.
-trap 'rc=$?; if [ $rc -ne 0 ]; then echo "demo: FAILED at step: ${current_step:-setup} (exit $rc)" >&2; fi' EXIT
-
-step() {
-  current_step="$1"
-  shift
-  echo
-  echo "==> $current_step"
-  echo "    \$ $*"
-  "$@"
-}
+# shellcheck source=lib/steps.sh
+. scripts/lib/steps.sh
+steps_init demo
 
 step "install dependencies" ./scripts/install-deps.sh
 step "configure (release preset)" cmake --preset release
@@ -36,6 +27,6 @@ step "generate $points uniform points, 10% interleaved removals" \
 step "replay the stream (threads: $threads, 0 = all cores) and validate" \
   build/pdt run "$stream" --threads "$threads" --validate
 step "the same workload against CGAL (sequential benchmark)" build/bench_sequential --points "$points" --dists uniform
-current_step=""
+steps_done
 echo
 echo "demo: all steps passed"

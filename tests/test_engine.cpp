@@ -29,6 +29,7 @@
 #include "common/cgal_reference.hpp"
 #include "common/point_sets.hpp"
 #include "common/streams.hpp"
+#include "common/engine_run.hpp"
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
@@ -41,233 +42,6 @@ using pdt::Point3;
 
 namespace {
 
-// -- sizes ---------------------------------------------------------------------
-#if defined(__SANITIZE_THREAD__)
-constexpr bool kTsan = true;
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-constexpr bool kTsan = true;
-#else
-constexpr bool kTsan = false;
-#endif
-#else
-constexpr bool kTsan = false;
-#endif
-
-// n in an optimised build; about a fifth of it (at least `floor`) under TSan,
-// which is 5-15x slower and serialises more.
-std::size_t scaled(std::size_t n, std::size_t floor = 200) { return kTsan ? std::max(floor, n / 5) : n; }
-
-constexpr unsigned kThreadCounts[] = {1, 2, 4, 8, 16};
-constexpr pdt::Distribution kDistributions[] = {pdt::Distribution::uniform, pdt::Distribution::normal,
-                                                pdt::Distribution::line, pdt::Distribution::grid,
-                                                pdt::Distribution::sphere};
-
-// Collects the errors operations report through their callbacks (none is expected:
-// a valid stream's operations cannot fail).
-struct ErrorSink {
-  std::atomic<std::uint64_t> count{0};
-  std::mutex mutex;
-  std::string first;
-  pdt::Engine::Callback callback() {
-    return [this](const pdt::OpResult& r) {
-      if (!r.error) return;
-      if (count.fetch_add(1) == 0) {
-        std::string what = "unknown exception";
-        try {
-          std::rethrow_exception(r.error);
-        } catch (const std::exception& e) {
-          what = e.what();
-        } catch (...) {
-        }
-        std::lock_guard lock(mutex);
-        first = what;
-      }
-    };
-  }
-  void require_none() {
-    std::lock_guard lock(mutex);
-    INFO("operations failed: " << count.load() << ", the first with: " << first);
-    REQUIRE(count.load() == 0);
-  }
-};
-
-// Livelock detector: while alive, polls the engine's statistics; if workers
-// keep attempting operations but none completes for `limit` seconds (a lock
-// that is never released makes every operation touching it roll back
-// forever), prints the statistics and aborts, so the run fails with a
-// diagnosis instead of hanging until an outer timeout.
-class Watchdog {
- public:
-  Watchdog(const pdt::Engine& e, std::string label) : engine_(e), label_(std::move(label)), thread_([this] { run(); }) {}
-  ~Watchdog() {
-    {
-      std::lock_guard lock(mutex_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    thread_.join();
-  }
-
- private:
-  void run() {
-    const double limit = kTsan ? 300 : 60;
-    std::uint64_t completed = 0, attempts = 0;
-    auto last_progress = std::chrono::steady_clock::now();
-    std::unique_lock lock(mutex_);
-    while (!cv_.wait_for(lock, std::chrono::milliseconds(500), [this] { return stop_; })) {
-      const pdt::WorkerStats t = engine_.stats().total();
-      const auto now = std::chrono::steady_clock::now();
-      if (t.completed != completed || t.attempts == attempts) last_progress = now;  // progress, or idle
-      if (std::chrono::duration<double>(now - last_progress).count() > limit) {
-        std::fprintf(stderr,
-                     "\n[engine watchdog] %s: livelock: %llu attempts but no operation completed for %.0f s "
-                     "(completed %llu, rollbacks %llu, deferred %llu, sleeps %llu); aborting\n",
-                     label_.c_str(), static_cast<unsigned long long>(t.attempts - attempts), limit,
-                     static_cast<unsigned long long>(t.completed), static_cast<unsigned long long>(t.rollbacks),
-                     static_cast<unsigned long long>(t.deferred), static_cast<unsigned long long>(t.sleeps));
-        std::fflush(stderr);
-        std::abort();
-      }
-      if (t.completed != completed || t.attempts == attempts) attempts = t.attempts;
-      completed = t.completed;
-    }
-  }
-  const pdt::Engine& engine_;
-  std::string label_;
-  std::mutex mutex_;
-  std::condition_variable cv_;
-  bool stop_ = false;
-  std::thread thread_;  // last: started once the rest is ready
-};
-
-// Submits a stream to an engine: ticket k must be insertion k.
-void submit_stream(pdt::Engine& e, const pdt::OpStream& s, std::vector<pdt::Engine::Ticket>& tickets,
-                   ErrorSink& errors) {
-  for (const auto& op : s.ops) {
-    if (op.kind == pdt::Operation::Kind::insert) {
-      const pdt::Engine::Ticket t = e.insert(op.point, errors.callback());
-      if (t != tickets.size()) FAIL("ticket " << t << " for insertion " << tickets.size());
-      tickets.push_back(t);
-    } else {
-      e.remove_insertion(tickets.at(op.target), errors.callback());
-    }
-  }
-}
-
-enum class ArenaMode {
-  inside,       // Engine constructed and used inside arena.execute, no arena argument
-  passed,       // Engine constructed on the test thread with &arena
-  caller_default  // no explicit arena at all: the caller's (implicit) one
-};
-
-struct EngineRun {
-  pdt::EngineStats stats;
-  pdt::EngineStats stats_at_barrier;  // when drained after `barrier` operations
-  unsigned threads = 0;
-  unsigned blocks = 0;
-};
-
-pdt::EngineOptions options_with(unsigned threads) {
-  pdt::EngineOptions o;  // not from the environment: the test decides
-  o.workers = threads;
-  o.grid_slots = 1u << 18;
-  return o;
-}
-
-// Replays s on an engine; with a barrier, drains after the first `barrier`
-// operations (the rest of the stream then runs against that state).
-EngineRun replay_engine(pdt::Triangulation& t, const pdt::OpStream& s, const pdt::Box& box, pdt::EngineOptions o,
-                        ArenaMode mode = ArenaMode::inside, int arena_concurrency = 2, std::size_t barrier = 0) {
-  EngineRun run;
-  ErrorSink errors;
-  auto body = [&](tbb::task_arena* arena) {
-    pdt::Engine e(t, box, o, arena);
-    Watchdog watchdog(e, std::to_string(s.ops.size()) + " operations, " + std::to_string(o.workers) + " workers");
-    std::vector<pdt::Engine::Ticket> tickets;
-    if (barrier) {
-      pdt::OpStream head, tail;
-      head.ops.assign(s.ops.begin(), s.ops.begin() + static_cast<std::ptrdiff_t>(barrier));
-      tail.ops.assign(s.ops.begin() + static_cast<std::ptrdiff_t>(barrier), s.ops.end());
-      submit_stream(e, head, tickets, errors);
-      e.drain();
-      run.stats_at_barrier = e.stats();
-      submit_stream(e, tail, tickets, errors);
-    } else {
-      submit_stream(e, s, tickets, errors);
-    }
-    e.drain();
-    run.stats = e.stats();
-    run.threads = e.workers();
-    run.blocks = e.blocks_per_axis();
-  };
-  if (mode == ArenaMode::caller_default) {
-    body(nullptr);
-  } else {
-    tbb::task_arena arena(arena_concurrency);
-    if (mode == ArenaMode::inside)
-      arena.execute([&] { body(nullptr); });
-    else
-      body(&arena);
-  }
-  errors.require_none();
-  return run;
-}
-
-std::uint64_t total_multiplicity(const pdt::Triangulation& t) {
-  std::uint64_t m = 0;
-  for (pdt::VertexId v : t.vertices()) m += t.multiplicity(v);
-  return m;
-}
-
-// Valid, CGAL's triangulation of the stream's survivors (multiplicities
-// included), and, when given, tetrahedron for tetrahedron the sequential result.
-void require_result(const pdt::Triangulation& t, const pdt::OpStream& s, const pdt::Triangulation* seq = nullptr) {
-  require_valid(t);
-  const std::vector<Point3> surv = survivors(s);
-  require_same_as_cgal(t, surv);
-  REQUIRE(total_multiplicity(t) == surv.size());
-  if (seq) {
-    const PointIndex idx = make_point_index(surv);
-    REQUIRE(t.dimension() == seq->dimension());
-    REQUIRE(t.number_of_vertices() == seq->number_of_vertices());
-    REQUIRE(t.number_of_cells() == seq->number_of_cells());
-    const bool same = canonical_tets(t, idx) == canonical_tets(*seq, idx);
-    REQUIRE(same);
-  }
-}
-
-// The bookkeeping the engine documents: every operation completed once; every
-// attempt either completed, rolled back, or was deferred.
-void require_stats(const EngineRun& run, std::size_t operations, unsigned threads) {
-  const pdt::EngineStats& st = run.stats;
-  REQUIRE(st.workers.size() == threads);
-  std::uint64_t completed = 0;
-  for (const pdt::WorkerStats& w : st.workers) {
-    INFO("completed " << w.completed << " attempts " << w.attempts << " rollbacks " << w.rollbacks << " deferred "
-                      << w.deferred);
-    REQUIRE(w.attempts >= w.completed);
-    REQUIRE(w.attempts == w.completed + w.rollbacks + w.deferred);
-    REQUIRE(w.seconds_asleep >= 0);
-    completed += w.completed;
-  }
-  REQUIRE(completed == operations);
-  const pdt::WorkerStats total = st.total();
-  REQUIRE(total.completed == operations);
-  REQUIRE(total.attempts >= total.completed);
-}
-
-template <class F>
-std::optional<pdt::ErrorCode> error_of(F&& f, std::string* message = nullptr) {
-  try {
-    f();
-  } catch (const pdt::Error& e) {
-    if (message) *message = e.what();
-    return e.code();
-  }
-  return std::nullopt;
-}
-
 std::vector<Point3> data_subsample(const std::string& rel, std::size_t n, std::uint64_t seed) {
   const std::string path = shared_data(rel);
   if (!std::filesystem::exists(path)) return {};
@@ -276,29 +50,6 @@ std::vector<Point3> data_subsample(const std::string& rel, std::size_t n, std::u
   if (pts.size() > n) pts.resize(n);
   return pts;
 }
-
-// Sets environment variables for its lifetime; restores (unsets) them after.
-struct EnvGuard {
-  std::vector<std::string> names;
-  void set(const char* name, const char* value) {
-    ::setenv(name, value, 1);
-    names.emplace_back(name);
-  }
-  ~EnvGuard() {
-    for (const auto& n : names) ::unsetenv(n.c_str());
-  }
-};
-
-// -- a minimal coroutine type: eager, self-destroying, no result --------------
-struct Detached {
-  struct promise_type {
-    Detached get_return_object() noexcept { return {}; }
-    std::suspend_never initial_suspend() noexcept { return {}; }
-    std::suspend_never final_suspend() noexcept { return {}; }
-    void return_void() noexcept {}
-    void unhandled_exception() noexcept { std::terminate(); }  // bodies catch everything
-  };
-};
 
 // What coroutines running on worker threads report (Catch2 assertions are not
 // thread-safe, so they record here and the test thread checks).
@@ -392,18 +143,6 @@ Detached insert_then_remove(pdt::Engine& engine, Point3 p, std::atomic<pdt::Vert
   state.store(1);
 }
 
-// Waits (draining) until `cond` holds or `seconds` pass.
-template <class Cond>
-bool wait_for(pdt::Engine& e, Cond cond, double seconds = 60) {
-  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (!cond()) {
-    if (std::chrono::steady_clock::now() > until) return false;
-    e.drain();
-    std::this_thread::yield();
-  }
-  return true;
-}
-
 }  // namespace
 
 // =============================================================================
@@ -462,7 +201,7 @@ TEST_CASE("engine: with threads = 0 the workers follow the arena's concurrency",
     const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, conc);
     REQUIRE(run.threads == static_cast<unsigned>(conc));
     unsigned b = 1;
-    while (b * b * b < 4 * run.threads) ++b;
+    while (b * b * b < 64 * run.threads) ++b;
     REQUIRE(run.blocks == b);
     require_stats(run, s.ops.size(), run.threads);
     require_result(t, s);
@@ -706,6 +445,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   o.contention_low = 1.0;
   o.contention_high = 1.0;
   o.contention_window = 1;
+  o.escalate_after = 0;  // the contention manager alone (escalation is tested in test_engine_contract)
   pdt::detail::OpContext holder(999, true);
   ErrorSink errors;
   bool slept = false, removed_while_held = false;
@@ -733,7 +473,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   REQUIRE(total.rollbacks > 0);
   REQUIRE(total.max_rollbacks_per_completed > 0);
   REQUIRE(total.completed == more.size() + 1);
-  REQUIRE(total.attempts == total.completed + total.rollbacks + total.deferred);
+  REQUIRE(total.attempts == total.completed + total.rollbacks);
   REQUIRE(total.seconds_asleep >= 0);
   errors.require_none();
   // (The victim's id may have been recycled by a later insertion: look for its point.)
@@ -1029,12 +769,15 @@ TEST_CASE("engine: insert_batch gives CGAL's triangulation; tickets follow the b
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(threads));
       ErrorSink errors;
       for (std::size_t i = 0; i < singles.size() / 2; ++i) e.insert(singles[i], errors.callback());
-      first = e.insert_batch(batch, [&](const pdt::OpResult& r) {
-        if (r.error || r.ticket < first || r.ticket >= first + batch.size()) {
+      // Callbacks run before insert_batch returns: they use the ticket the
+      // batch must start at, not `first` (checked below).
+      const pdt::Engine::Ticket expected_first = singles.size() / 2;
+      first = e.insert_batch(batch, [&, expected_first](const pdt::OpResult& r) {
+        if (r.error || r.ticket < expected_first || r.ticket >= expected_first + batch.size()) {
           ticket_error = true;
           return;
         }
-        ++calls[r.ticket - first];  // each ticket is called exactly once, on one thread
+        ++calls[r.ticket - expected_first];  // each ticket is called exactly once, on one thread
       });
       for (std::size_t i = singles.size() / 2; i < singles.size(); ++i) e.insert(singles[i], errors.callback());
       // A batch with one point outside the domain is refused whole.
@@ -1266,8 +1009,8 @@ TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
     // A degenerate (flat) box is allowed: lo == hi on an axis.
     REQUIRE_FALSE(error_of([&] { pdt::Engine e(t, pdt::Box{{0, 0, 0}, {1, 1, 0}}, options_with(2)); }));
 
-    for (auto [threads, blocks, want_blocks] : {std::tuple{1u, 0u, 2u}, std::tuple{5u, 0u, 3u},
-                                                std::tuple{16u, 0u, 4u}, std::tuple{3u, 7u, 7u},
+    for (auto [threads, blocks, want_blocks] : {std::tuple{1u, 0u, 4u}, std::tuple{5u, 0u, 7u},
+                                                std::tuple{16u, 0u, 11u}, std::tuple{3u, 7u, 7u},
                                                 std::tuple{16u, 1u, 1u}}) {
       pdt::EngineOptions oo = options_with(threads);
       oo.blocks_per_axis = blocks;
@@ -1284,19 +1027,22 @@ TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
 TEST_CASE("engine: unusual block layouts still give the exact result", "[engine][tsan]") {
   // One block for 8 workers (7 idle), more blocks than needed, a flat domain axis.
   const pdt::OpStream s = generated(pdt::Distribution::uniform, scaled(2000, 300), 0.3, pdt::RemovalOrder::interleaved, 9);
-  for (unsigned blocks : {1u, 9u}) {
-    INFO(blocks << " blocks per axis");
+  for (unsigned blocks : {1u, 9u})
+  for (bool stealing : {true, false}) {
+    INFO(blocks << " blocks per axis, stealing " << stealing);
     pdt::EngineOptions o = options_with(8);
     o.blocks_per_axis = blocks;
     o.contention_window = 4;
+    o.stealing = stealing;
     pdt::Triangulation t;
     const EngineRun run = replay_engine(t, s, *s.box, o);
     REQUIRE(run.blocks == blocks);
     require_stats(run, s.ops.size(), 8);
-    if (blocks == 1) {
-      // Everything goes to worker 0.
+    if (blocks == 1 && !stealing) {
+      // Everything goes to worker 0, whose home the one block is.
       REQUIRE(run.stats.workers[0].completed == s.ops.size());
     }
+    if (!stealing) REQUIRE(run.stats.total().steals == 0);
     require_result(t, s);
   }
 }

@@ -1,27 +1,57 @@
 #pragma once
 // pdt::Engine: many workers carrying out a live stream of insertions and
-// removals on one Triangulation (Foteinos & Chrisochoides, §3).
+// removals on one Triangulation (Foteinos & Chrisochoides, §3), in the
+// caller's oneTBB arena.
 //
-// Model. The engine is given the domain box up front; the box is split into
-// blocks_per_axis^3 blocks, each owned by one worker with its own queue, and
-// every operation goes to the worker owning its point's block (a removal: the
-// vertex's point). Workers run as oneTBB tasks in the caller's task_arena (the
-// arena the constructing thread is in, or the one passed): no hidden thread
-// pool. A worker takes per-vertex try-locks (shared while walking, exclusive
-// on a cavity or hole); when a lock is taken it rolls the operation back
-// (nothing was changed), puts it back in its queue and moves on. A contention
-// manager keeps each worker's progress ratio completed/attempted: below
-// contention_low the worker suspends (releasing everything), above
-// contention_high it wakes a sleeper; at least one worker always runs, so the
-// engine cannot livelock. Because ties are broken by symbolic perturbation the
-// final triangulation does not depend on the worker count or the interleaving.
+// Model. The engine is given the domain box up front; the box is cut into
+// blocks_per_axis^3 blocks, numbered along a Morton curve, and every operation
+// goes to the queue of its point's block (a removal: the vertex's point).
+// Each worker has a home: a run of neighbouring blocks, which it serves first;
+// a worker with nothing at home takes over a non-empty block from elsewhere
+// (nearest first), so work that concentrates or moves still uses every worker.
+// A block is served by one worker at a time. Workers are C++20 coroutines run
+// as oneTBB tasks in the caller's task_arena (the arena the constructing
+// thread is in, or the one passed): no hidden thread pool, and a worker with
+// nothing to do is suspended, not blocking a thread. A worker takes
+// per-vertex try-locks (shared while walking, exclusive on a cavity or hole);
+// when a lock is taken it rolls the operation back (nothing was changed),
+// puts it back in its block's queue and moves on. A contention manager keeps
+// each worker's progress ratio completed/attempted: below contention_low the
+// worker suspends, above contention_high it wakes a sleeper; the last running
+// worker never sleeps. An operation rolled back escalate_after times runs
+// with the world stopped, alone, so it completes. Because ties are broken by
+// symbolic perturbation the final triangulation does not depend on the worker
+// count or the interleaving.
 //
-// Any thread may submit while the engine runs. Results come back three ways:
-//   co_await engine.insert(p)            (C++20 coroutine; resumes as a TBB task)
-//   engine.insert(p, callback)           (callback on a worker thread; keep it short)
-//   engine.drain()                       (waits until every submitted operation is done)
-// While an engine runs, do not call the Triangulation's mutating methods or
-// queries directly; after drain() they see the final state.
+// The contract.
+//  - Lifetime. An Engine attaches to its Triangulation for its whole life:
+//    the triangulation must outlive it, only one engine at a time may be
+//    attached (a second is refused with pdt::Error), and the triangulation's
+//    mutators (insert, remove, clear, move, set_change_hook) are refused while
+//    it is attached. Engines may come and go on one triangulation, with
+//    sequential work in between; each leaves it valid.
+//  - Threads. Any thread may submit at any time, including from callbacks,
+//    hooks and coroutines the engine resumed. drain(), stats() and
+//    in_flight() may be called from any thread outside the engine's work.
+//    The triangulation's const queries are safe after drain() returns and
+//    before the next submission; while operations are in flight, read through
+//    the engine: locate, nearest_vertex and visit take shared locks and retry
+//    on conflict.
+//  - Results come back three ways: co_await engine.insert(p) (the coroutine
+//    resumes as a TBB task), engine.insert(p, callback) (the callback runs on
+//    a worker: keep it short), and drain() (waits until every operation
+//    submitted before it is done).
+//  - Exceptions. Bad input is refused at submission (the callback forms
+//    throw, the awaitable forms throw from co_await) and submits nothing. An
+//    operation that fails in flight reports its error in OpResult::error. An
+//    exception thrown by a callback, a change hook or a coroutine the engine
+//    resumed is caught, counted (EngineStats::client_errors), and the first
+//    one is rethrown by the next drain(); the engine goes on working.
+//  - What cannot be refused: a callback or hook that blocks until another
+//    thread's drain() returns, or until an operation it submitted completes,
+//    waits for itself (drain() waits for the callback) and hangs. Callbacks
+//    must not wait for the engine; co_await instead. drain() and the
+//    destructor called from the engine's own work are detected and refused.
 #include <coroutine>
 #include <cstdint>
 #include <exception>
@@ -33,6 +63,7 @@
 
 #include <oneapi/tbb/task_arena.h>
 
+#include "pdt/changes.hpp"
 #include "pdt/engine_options.hpp"
 #include "pdt/geometry.hpp"
 #include "pdt/triangulation.hpp"
@@ -41,89 +72,124 @@ namespace pdt {
 
 struct WorkerStats {
   std::uint64_t completed = 0;  // operations done
-  std::uint64_t attempts = 0;   // tries, completed + rolled back + deferred
-  std::uint64_t rollbacks = 0;  // tries that met a lock
-  std::uint64_t deferred = 0;   // removals tried before the insertion they undo was done
+  std::uint64_t attempts = 0;   // tries that ran: completed + rolled back
+  std::uint64_t rollbacks = 0;  // tries that met a lock held by another worker
+  std::uint64_t deferred = 0;   // undos that arrived before the insertion they undo was done (parked)
   std::uint64_t sleeps = 0;     // times the contention manager suspended this worker
+  std::uint64_t steals = 0;     // blocks it served away from its home
+  std::uint64_t escalated = 0;  // operations it ran with the world stopped after escalate_after rollbacks
   double seconds_asleep = 0;
   double max_rollbacks_per_completed = 0;  // the paper's "Max #Rollbacks/#compl. ops", per worker
 };
 
 struct EngineStats {
   std::vector<WorkerStats> workers;
-  std::uint64_t global_operations = 0;  // run with the world stopped (dimension changes)
+  std::uint64_t global_operations = 0;  // run with the world stopped (dimension changes, escalations)
+  std::uint64_t client_errors = 0;      // exceptions from callbacks, hooks and resumed coroutines
   WorkerStats total() const;            // sums; max ratio is the max over workers
+  // Load balance: max over workers of completed operations / the mean (1 = even).
+  double imbalance() const;
 };
 
-// Which kind of operation an OpResult reports.
-enum class OpKind : std::uint8_t {
-  insert,            // insert(p), insert_batch
-  remove,            // remove(v)
-  remove_insertion,  // remove_insertion(t), remove_insertions
-};
-
-// The outcome of one operation.
+// The outcome of one operation; `kind` says which fields mean something.
 struct OpResult {
   OpKind kind = OpKind::insert;
-  InsertResult insert;                               // for insertions
-  RemoveResult remove = RemoveResult::removed;       // for removals
-  std::exception_ptr error;                          // a pdt::Error if the operation failed
-  std::uint64_t ticket = ~std::uint64_t{0};          // insertions and their undos: the insertion's ticket
+  InsertResult insert;                          // insert
+  RemoveResult remove = RemoveResult::removed;  // remove, remove_insertion
+  LocateResult locate;                          // locate
+  VertexId nearest = no_vertex;                 // nearest_vertex
+  bool alive = false;                           // visit: the cell was live (and fn ran)
+  std::exception_ptr error;                     // a pdt::Error if the operation failed
+  std::uint64_t ticket = ~std::uint64_t{0};     // insertions and their undos: the insertion's ticket
+  std::uint32_t rollbacks = 0;                  // times it met a lock before it completed
+  bool escalated = false;                       // it then ran with the world stopped
 };
 
 class Engine;
 
+// A function run on a cell under the engine's locks (Engine::visit).
+using CellVisitor = std::function<void(const CellView&)>;
+
 namespace detail {
 struct EngineState;
+// What an awaitable asks the engine for.
+struct Request {
+  OpKind kind = OpKind::insert;
+  Point3 point;
+  VertexHandle vertex;  // remove: incarnation 0 = whichever is live now
+  CellHandle cell;      // visit
+  CellVisitor visitor;  // visit
+};
 struct OpAwaitBase {
-  Engine* engine;
+  Engine* engine = nullptr;
+  Request request;
   OpResult result;
   std::coroutine_handle<> waiter;
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h);  // false: refused at once; await_resume throws
 };
+inline void take(const OpResult& r, InsertResult& out) { out = r.insert; }
+inline void take(const OpResult& r, RemoveResult& out) { out = r.remove; }
+inline void take(const OpResult& r, LocateResult& out) { out = r.locate; }
+inline void take(const OpResult& r, VertexId& out) { out = r.nearest; }
+inline void take(const OpResult& r, bool& out) { out = r.alive; }
 }  // namespace detail
 
-class [[nodiscard]] InsertAwaitable : detail::OpAwaitBase {
+// co_await engine.insert(p) and friends: T is what co_await gives.
+template <class T>
+class [[nodiscard]] OpAwaitable : public detail::OpAwaitBase {
  public:
-  bool await_ready() const noexcept { return false; }
-  bool await_suspend(std::coroutine_handle<> h);  // false: failed at once, await_resume throws
-  InsertResult await_resume();  // rethrows the operation's error
-
- private:
-  friend class Engine;
-  Point3 point_;
+  T await_resume() {  // rethrows the operation's error
+    if (result.error) std::rethrow_exception(result.error);
+    T out{};
+    detail::take(result, out);
+    return out;
+  }
 };
-
-class [[nodiscard]] RemoveAwaitable : detail::OpAwaitBase {
- public:
-  bool await_ready() const noexcept { return false; }
-  bool await_suspend(std::coroutine_handle<> h);
-  RemoveResult await_resume();  // rethrows the operation's error
-
- private:
-  friend class Engine;
-  VertexId vertex_ = no_vertex;
-};
+using InsertAwaitable = OpAwaitable<InsertResult>;
+using RemoveAwaitable = OpAwaitable<RemoveResult>;
+using LocateAwaitable = OpAwaitable<LocateResult>;
+using NearestAwaitable = OpAwaitable<VertexId>;
+using VisitAwaitable = OpAwaitable<bool>;
 
 class Engine {
  public:
   using Callback = std::function<void(const OpResult&)>;
   using Ticket = std::uint64_t;  // numbers the insertions submitted to this engine, from 0
 
-  // The triangulation must outlive the engine; points outside `domain` are
-  // refused. arena: where workers run; null = the caller's current arena.
+  // Attaches to t. Points outside `domain` are refused. arena: where workers
+  // run; null = the caller's current arena. Throws pdt::Error(invalid_argument)
+  // for a bad domain or option, or when another engine is attached to t.
   Engine(Triangulation& t, const Box& domain, EngineOptions options = EngineOptions::from_environment(),
          tbb::task_arena* arena = nullptr);
-  ~Engine();  // drains; so never destroy an engine from its own callbacks or coroutines
+  // Drains (client errors not collected by a drain() are dropped: see
+  // stats()), then detaches. Called from the engine's own callbacks or
+  // coroutines it throws pdt::Error instead: the engine cannot destroy the
+  // work that is running it (it is then left running, detached from nothing,
+  // and leaked).
+  ~Engine() noexcept(false);
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;
 
-  // Awaitable forms. Errors (NaN, outside the domain) are thrown by co_await.
+  // -- awaitable forms: errors (NaN, outside the domain, a dead vertex) are
+  //    thrown by co_await ---------------------------------------------------------
   InsertAwaitable insert(const Point3& p);
   RemoveAwaitable remove(VertexId v);
-  // Callback forms (callback may be empty). insert() throws pdt::Error at once
-  // for a NaN/Inf point or one outside the domain, and submits nothing.
+  RemoveAwaitable remove(VertexHandle v);  // that incarnation only
+  LocateAwaitable locate(const Point3& p);
+  NearestAwaitable nearest_vertex(const Point3& p);  // no_vertex if empty
+  // Runs fn on h's cell under the engine's locks if that incarnation is still
+  // live; co_await gives whether it was (false: dead, fn not called).
+  VisitAwaitable visit(CellHandle h, CellVisitor fn);
+
+  // -- callback forms (callback may be empty): bad input throws pdt::Error at
+  //    once and submits nothing ------------------------------------------------------
   Ticket insert(const Point3& p, Callback done);
   void remove(VertexId v, Callback done);
+  void remove(VertexHandle v, Callback done);
+  void locate(const Point3& p, Callback done);
+  void nearest_vertex(const Point3& p, Callback done);
+  void visit(CellHandle h, CellVisitor fn, Callback done);
   // A batch of insertions, submitted in spatial order (CGAL's spatial sort,
   // parallel in the engine's arena, as CGAL's range insertion does): each
   // worker then walks from its previous vertex, about twice as fast as a
@@ -134,33 +200,44 @@ class Engine {
   Ticket insert_batch(std::span<const Point3> points, Callback done = {});
   // The result of insertion t once it has finished (after drain(), or in
   // anything its callback or co_await started). Throws pdt::Error
-  // (invalid_argument) for a ticket never issued or not finished, and
-  // rethrows the insertion's own error if it failed.
+  // (invalid_argument) for a ticket never issued, not finished, or released,
+  // and rethrows the insertion's own error if it failed.
   InsertResult insertion_result(Ticket t) const;
   // Undoes insertion `t` of this engine; it waits for that insertion to finish
   // first, so a stream can be replayed without barriers. Throws at once for a
-  // ticket never issued or already undone.
+  // ticket never issued, already undone, or released.
   void remove_insertion(Ticket t, Callback done = {});
   // A batch of undos, submitted in spatial order (as insert_batch). All or
   // nothing: throws, and undoes nothing, if any ticket was never issued, is
   // already undone or appears twice.
   void remove_insertions(std::span<const Ticket> tickets, Callback done = {});
+  // Tickets cost memory only while they can still be used: a ticket is
+  // released once its insertion is undone, or once its vertex is gone
+  // (removed by handle or id); then insertion_result and remove_insertion
+  // refuse it.
+
+  // Calls hook inside every later operation that creates or deletes a vertex
+  // (changes.hpp), on the worker that runs it. Set it before submitting:
+  // throws pdt::Error(invalid_argument) while operations are in flight.
+  void set_change_hook(ChangeHook hook, bool report_destroyed = false);
 
   // Returns when no operation is pending: every one submitted before the call
   // is done (and those other threads submit meanwhile, so a producer that
-  // never pauses keeps it waiting). Throws pdt::Error(invalid_argument) when
-  // called from this engine's own callbacks or from a coroutine it resumed:
-  // there it would wait for itself.
+  // never pauses keeps it waiting). Then rethrows the first exception a
+  // callback, hook or resumed coroutine threw since the last drain(), if any.
+  // Throws pdt::Error(invalid_argument) when called from this engine's own
+  // callbacks or from a coroutine it resumed: there it would wait for itself.
   void drain();
+  // Operations submitted and not finished yet (for back-pressure).
+  std::uint64_t in_flight() const;
   EngineStats stats() const;
   unsigned workers() const;
-  [[deprecated("use workers()")]] unsigned threads() const { return workers(); }
+  [[deprecated("use workers(): it counts workers, not threads")]] unsigned threads() const { return workers(); }
   unsigned blocks_per_axis() const;
   const EngineOptions& options() const;
 
  private:
-  friend class InsertAwaitable;
-  friend class RemoveAwaitable;
+  friend struct detail::OpAwaitBase;
   std::unique_ptr<detail::EngineState> state_;
 };
 

@@ -11,12 +11,22 @@ struct EngineOptions {
   // them is the task_arena's business (its concurrency), so 16 workers in an
   // arena of 2 threads is fine (and tests every interleaving the locks allow).
   unsigned workers = 0;
-  unsigned blocks_per_axis = 0;     // PDT_BLOCKS_PER_AXIS: 0 = smallest b with b^3 >= 4 * workers
+  // PDT_BLOCKS_PER_AXIS: the domain is cut into b^3 blocks (at most 64 per
+  // axis); 0 = the smallest b with b^3 >= 64 * workers, so that a worker can
+  // take over part of a busy region.
+  unsigned blocks_per_axis = 0;
   double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
   double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
   unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
   std::size_t grid_slots = 1u << 23;  // PDT_GRID_SLOTS: most slots of the jump-and-walk grid, which
                                       // grows with the vertex count (about 2 vertices per slot)
+  // PDT_ESCALATE_AFTER: an operation rolled back this many times runs with
+  // the world stopped (alone), so none starves (0 = never escalate).
+  unsigned escalate_after = 64;
+  // PDT_STEALING (0 or 1): a worker with nothing at home serves other
+  // workers' blocks. Off: each block is served by its home worker only
+  // (the paper's static partition).
+  bool stealing = true;
   // Deprecated: the name of `workers` in pdt 0.1 (it counts workers, not
   // threads); used only when workers is 0. PDT_THREADS is read into workers.
   unsigned threads = 0;

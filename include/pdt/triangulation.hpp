@@ -25,15 +25,27 @@
 // distinct points whose insertions have not all been undone.
 //
 // Ids. A VertexId stays valid until its vertex disappears; the id may then be
-// reused by a later insertion. Storage grows without moving ids.
+// reused by a later insertion. Storage grows without moving ids. Handles
+// (changes.hpp) add the incarnation, so a stale one is recognised.
+//
+// Threads. Every const method may be called from many threads at once, as
+// long as nothing mutates the triangulation meanwhile: no insert/remove/clear
+// in progress and no engine operation in flight (after Engine::drain(), an
+// attached engine's triangulation is quiescent until the next submission).
+// While an engine works, read through it (Engine::locate, nearest_vertex,
+// visit). Mutating methods are for one thread at a time, and are refused with
+// pdt::Error(invalid_argument) while an Engine is attached: the engine owns
+// the triangulation from its construction to its destruction.
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "pdt/changes.hpp"
 #include "pdt/geometry.hpp"
 
 namespace pdt {
@@ -42,16 +54,11 @@ namespace detail {
 struct ImplAccess;
 }
 
-using VertexId = std::uint32_t;
-using CellId = std::uint32_t;
-
-inline constexpr VertexId infinite_vertex = 0;
-inline constexpr VertexId no_vertex = 0xFFFFFFFFu;
-inline constexpr CellId no_cell = 0xFFFFFFFFu;
-
 struct InsertResult {
   VertexId vertex = no_vertex;  // the new vertex, or the existing one equal to the point
   bool inserted = false;        // false: the point was a duplicate, multiplicity raised
+  std::uint64_t incarnation = 0;  // the vertex's incarnation (see changes.hpp)
+  VertexHandle handle() const { return {vertex, incarnation}; }
 };
 
 enum class RemoveResult {
@@ -98,11 +105,13 @@ class Triangulation {
  public:
   Triangulation();
   ~Triangulation();
-  Triangulation(Triangulation&&) noexcept;
-  Triangulation& operator=(Triangulation&&) noexcept;
+  // Moving is refused (pdt::Error) while an engine is attached to either side.
+  Triangulation(Triangulation&&);
+  Triangulation& operator=(Triangulation&&);
   Triangulation(const Triangulation&) = delete;
   Triangulation& operator=(const Triangulation&) = delete;
 
+  // -- mutation (one thread; refused while an engine is attached) -------------
   // Inserts p. Throws pdt::Error(non_finite_coordinate) for NaN/Inf and changes nothing.
   InsertResult insert(const Point3& p, Hint hint = {});
   // Inserts a batch in an order of its own (CGAL's spatial sort, as CGAL's
@@ -115,14 +124,23 @@ class Triangulation {
   // Undoes one insertion of v. Throws pdt::Error(unknown_vertex) for the infinite
   // vertex, an id never issued or a vertex already gone, and changes nothing.
   RemoveResult remove(VertexId v);
+  // The same for one incarnation: a handle whose vertex is gone (even if its
+  // id was reused since) is refused with unknown_vertex.
+  RemoveResult remove(VertexHandle v);
   void clear();
+  // Calls hook inside every later insert/remove that creates or deletes a
+  // vertex (see changes.hpp), with the cells it created, and with those it
+  // destroyed when report_destroyed. An empty hook turns reporting off.
+  void set_change_hook(ChangeHook hook, bool report_destroyed = false);
 
-  // -- queries ---------------------------------------------------------------
+  // -- queries (const: thread-safe on a quiescent triangulation) ---------------
   int dimension() const;                         // -1 empty, 0..3
   std::size_t number_of_vertices() const;        // distinct finite vertices
   std::size_t number_of_finite_cells() const;    // tetrahedra (0 while dimension < 3)
   std::size_t number_of_cells() const;           // finite + infinite
   bool is_vertex(VertexId v) const;              // a live finite vertex
+  bool is_vertex(VertexHandle v) const;          // that incarnation is live
+  VertexHandle vertex_handle(VertexId v) const;  // precondition: is_vertex(v)
   Point3 point(VertexId v) const;                // precondition: is_vertex(v)
   std::uint32_t multiplicity(VertexId v) const;  // 0 if not a vertex
   LocateResult locate(const Point3& p, Hint hint = {}) const;
@@ -140,6 +158,9 @@ class Triangulation {
   VertexId cell_vertex(CellId c, int i) const;
   CellId cell_neighbor(CellId c, int i) const;
   VertexId vertex_id_bound() const;
+  CellHandle cell_handle(CellId c) const;          // precondition: is_cell(c)
+  // The cell of h if that incarnation is still live; nothing if it died.
+  std::optional<CellView> cell(CellHandle h) const;
 
   // Checks every invariant of the structure (see lib/triangulation_impl.hpp)
   // and the local Delaunay property of every facet with exact predicates.
@@ -147,7 +168,7 @@ class Triangulation {
   bool validate(std::string* why = nullptr) const;
 
   const TriangulationStats& stats() const;
-  std::size_t memory_bytes() const;  // bytes held by cell and vertex storage
+  std::size_t memory_bytes() const;  // bytes held by cell and vertex storage and the jump grid
 
   struct Impl;  // lib/triangulation_impl.hpp
 

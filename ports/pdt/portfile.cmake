@@ -35,6 +35,7 @@ vcpkg_cmake_configure(
 )
 vcpkg_cmake_install()
 vcpkg_cmake_config_fixup(PACKAGE_NAME pdt CONFIG_PATH share/pdt)
+vcpkg_fixup_pkgconfig()  # lib/pkgconfig/pdt.pc (and debug/): relocatable, checked with pkg-config
 
 # Headers are the same in both configurations; vcpkg wants them once.
 file(REMOVE_RECURSE "${CURRENT_PACKAGES_DIR}/debug/include" "${CURRENT_PACKAGES_DIR}/debug/share")

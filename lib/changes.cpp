@@ -1,0 +1,48 @@
+// Change reporting (changes.hpp): the cells an operation made and deleted,
+// handed to the hook while the operation still holds them; and cell handles.
+#include "fault_injection.hpp"
+#include "triangulation_impl.hpp"
+
+namespace pdt {
+
+using detail::OpContext;
+
+CellHandle Triangulation::Impl::handle_of(CellId c) const {
+  const VertexId* v = cells[c].v;
+  return {c, incarnation(c), v[0] != 0 ? v[0] : v[1]};
+}
+
+void Triangulation::Impl::fill_view(CellId c, CellView& out) const {
+  out.handle = handle_of(c);
+  for (int i = 0; i < 4; ++i) {
+    const VertexId w = cells[c].v[i];
+    out.vertices[i] = w;
+    out.points[i] = w == 0 ? Point3{} : Point3{pt(w).x(), pt(w).y(), pt(w).z()};
+  }
+}
+
+void Triangulation::Impl::begin_report(OpContext& ctx, std::size_t cells_made, std::size_t cells_unmade) {
+  ctx.recording = ctx.hook != nullptr && *ctx.hook;
+  if (!ctx.recording) return;
+  ctx.created.clear();
+  ctx.destroyed.clear();
+  PDT_FAULT_POINT("change report");
+  ctx.created.reserve(cells_made);
+  ctx.views.reserve(cells_made);
+  if (ctx.report_destroyed) ctx.destroyed.reserve(cells_unmade);
+}
+
+void Triangulation::Impl::end_report(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation) {
+  if (!ctx.recording) return;
+  ctx.recording = false;
+  ctx.views.resize(ctx.created.size());
+  for (std::size_t i = 0; i < ctx.created.size(); ++i) fill_view(ctx.created[i], ctx.views[i]);
+  Changes changes;
+  changes.kind = kind;
+  changes.vertex = {v, incarnation};
+  changes.created = ctx.views;
+  changes.destroyed = ctx.destroyed;
+  (*ctx.hook)(changes);
+}
+
+}  // namespace pdt

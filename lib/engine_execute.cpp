@@ -1,0 +1,198 @@
+// Running one operation on a worker: its kernel call under try-locks, what a
+// rollback, a parked undo, an escalation or a dimension change do, and
+// delivering its result.
+#include <cassert>
+
+#include "engine_state.hpp"
+#include "pdt/error.hpp"
+
+namespace pdt::detail {
+
+
+// ---------------------------------------------------------------------------
+// The kernel call
+// ---------------------------------------------------------------------------
+OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp) {
+  switch (op.kind) {
+    case OpKind::insert: {
+      const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
+      Triangulation::Impl::Inserted out;
+      const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out);
+      if (s == OpStatus::done) {
+        r.insert = out.result;
+        stamp = out.stamp;
+        w.last_inserted = out.result.vertex;
+      }
+      return s;
+    }
+    case OpKind::remove:
+      return impl.remove(ctx, op.vertex, op.stamp, r.remove);
+    case OpKind::remove_insertion: {
+      const TicketView t = tickets.view(op.ticket);
+      if (t.state != TicketState::inserted)
+        throw Error(ErrorCode::unknown_vertex,
+                    "cannot undo insertion " + std::to_string(op.ticket) + ": that insertion failed");
+      return impl.remove(ctx, t.vertex, t.stamp, r.remove);
+    }
+    case OpKind::locate:
+      return impl.locate(ctx, to_kpoint(op.point), no_vertex, no_cell, r.locate);
+    case OpKind::nearest_vertex:
+      return impl.nearest_vertex(ctx, to_kpoint(op.point), r.nearest);
+    case OpKind::visit: {
+      // The visitor runs while the anchor is held; what it throws is the
+      // client's, not the operation's.
+      const CellVisitor guarded = [&](const CellView& view) {
+        if (!op.visitor) return;
+        try {
+          op.visitor(view);
+        } catch (...) {
+          record_client_error(std::current_exception());
+        }
+      };
+      return impl.find_cell(ctx, op.cell, &r.alive, nullptr, &guarded);
+    }
+  }
+  return OpStatus::done;
+}
+
+// ---------------------------------------------------------------------------
+// One attempt
+// ---------------------------------------------------------------------------
+EngineState::Outcome EngineState::execute(Worker& w, OpRecord* opp) {
+  OpRecord& op = *opp;
+  if (!op.routed) {
+    // Submitted while its vertex was held, so its place was unknown: read it
+    // now and move the operation to its block.
+    const VertexId v = op.kind == OpKind::visit ? op.cell.anchor : op.vertex;
+    Point3 p;
+    std::uint64_t stamp = 0;
+    if (v < impl.verts.size() && try_read_vertex(impl, v, 0, &p, &stamp)) {
+      op.point = p;
+      op.routed = true;
+      Block& dest = blocks[partition.block_of(p)];
+      if (dest.holder.load(std::memory_order_relaxed) != static_cast<int>(w.index)) {
+        enqueue(dest, opp);
+        return Outcome::parked;
+      }
+    } else {
+      // Held again, or not a live vertex: run it here. Its block only matters
+      // for locality; the kernel call rolls back (and escalates) or fails cleanly.
+      op.routed = true;
+    }
+  }
+  if (op.kind == OpKind::remove_insertion && tickets.view(op.ticket).state == TicketState::pending) {
+    // The insertion it undoes is not done yet: park it on the ticket; the
+    // insertion's completion re-queues it. Not an attempt, not a conflict.
+    w.deferred.fetch_add(1, std::memory_order_relaxed);
+    if (!tickets.park(op.ticket, opp)) return Outcome::parked;
+    // Done meanwhile: run it now.
+  }
+  if (!world.enter(w.index)) return Outcome::global;  // stopped: wait, then retry
+  OpContext& ctx = *w.ctx;
+  OpResult r;
+  OpStatus s = OpStatus::done;
+  std::uint64_t stamp = 0;
+  try {
+    s = run_op(w, ctx, op, r, stamp);
+  } catch (...) {
+    impl.release_all(ctx);
+    r.error = std::current_exception();
+    s = OpStatus::done;
+  }
+  world.leave(w.index);
+  switch (s) {
+    case OpStatus::rollback:
+      w.attempts.fetch_add(1, std::memory_order_relaxed);
+      w.rollbacks.fetch_add(1, std::memory_order_relaxed);
+      w.contention.attempted();
+      if (opts.escalate_after && ++op.rollbacks >= opts.escalate_after && run_global(w, opp, true)) {
+        w.escalated.fetch_add(1, std::memory_order_relaxed);
+        return Outcome::done;
+      }
+      return Outcome::rollback;
+    case OpStatus::needs_global:
+      return run_global(w, opp) ? Outcome::done : Outcome::global;
+    case OpStatus::done:
+      break;
+  }
+  w.attempts.fetch_add(1, std::memory_order_relaxed);
+  w.contention.attempted();
+  w.contention.completed();
+  complete(w, opp, r, stamp);
+  return Outcome::done;
+}
+
+bool EngineState::run_global(Worker& w, OpRecord* opp, bool escalated) {
+  std::unique_lock<std::mutex> lock;
+  if (!world.try_stop(w.index, lock)) return false;
+  // Nobody else is inside an operation: run it single-threaded, in the
+  // sequential context. Whatever happens, the world restarts.
+  OpResult r;
+  r.escalated = escalated;
+  std::uint64_t stamp = 0;
+  try {
+    run_op(w, *impl.seq, *opp, r, stamp);  // single-threaded: always done
+  } catch (...) {
+    r.error = std::current_exception();
+  }
+  try {
+    ensure_grid();
+  } catch (const std::bad_alloc&) {
+    // No new grid: walks start from the old one (or from vertices).
+  }
+  global_ops.fetch_add(1, std::memory_order_relaxed);
+  world.restart(lock, [this](std::coroutine_handle<> h) { spawn(h); });
+  w.attempts.fetch_add(1, std::memory_order_relaxed);
+  w.contention.attempted();
+  w.contention.completed();
+  complete(w, opp, r, stamp);
+  return true;
+}
+
+// ---------------------------------------------------------------------------
+// Delivering the result
+// ---------------------------------------------------------------------------
+void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t stamp) {
+  OpRecord& op = *opp;
+  r.kind = op.kind;
+  r.rollbacks = op.rollbacks;
+  if (op.kind == OpKind::insert || op.kind == OpKind::remove_insertion) r.ticket = op.ticket;
+  if (op.kind == OpKind::insert) {
+    OpRecord* undo = r.error ? tickets.finish_failed(op.ticket, r.error)
+                             : tickets.finish_inserted(op.ticket, r.insert.vertex, r.insert.inserted, stamp);
+    if (undo) {
+      undo->point = op.point;  // now known: where the vertex is
+      undo->routed = true;
+      enqueue(blocks[partition.block_of(op.point)], undo);
+    }
+  } else if (op.kind == OpKind::remove_insertion) {
+    tickets.release(op.ticket);
+  }
+  w.completed.fetch_add(1, std::memory_order_relaxed);
+  if (op.done) {
+    try {
+      op.done(r);
+    } catch (...) {
+      record_client_error(std::current_exception());
+    }
+  }
+  if (BatchCallback* batch_done = op.batch_done) {
+    if (batch_done->fn) {
+      try {
+        batch_done->fn(r);
+      } catch (...) {
+        record_client_error(std::current_exception());
+      }
+    }
+    if (batch_done->remaining.fetch_sub(1, std::memory_order_acq_rel) == 1) delete batch_done;
+  }
+  if (OpAwaitBase* a = op.awaiter) {
+    a->result = std::move(r);
+    std::coroutine_handle<> h = a->waiter;  // `a` may be gone once h resumes
+    spawn(h);
+  }
+  records.release(opp);
+  w.finished.store(w.finished.load(std::memory_order_relaxed) + 1, std::memory_order_release);
+}
+
+}  // namespace pdt::detail

@@ -1,0 +1,314 @@
+// The engine's scheduler: worker coroutines run as oneTBB tasks, claiming
+// blocks (home first, then the nearest busy block elsewhere), their phases
+// (running, idle, sleeping, waiting for the stopped world) and wake-ups.
+#include <algorithm>
+#include <cassert>
+#include <thread>
+
+#include "engine_state.hpp"
+
+namespace pdt::detail {
+
+thread_local const EngineState* EngineState::running_engine = nullptr;
+
+void EngineState::spawn(std::coroutine_handle<> h) {
+  arena->execute([&] {
+    tasks.run([this, h] {
+      const EngineState* outer = running_engine;
+      running_engine = this;
+      try {
+        h.resume();
+      } catch (...) {
+        // A client coroutine whose promise rethrows: its exception must not
+        // reach the task group (it would cancel the engine's other tasks).
+        record_client_error(std::current_exception());
+      }
+      running_engine = outer;
+    });
+  });
+}
+
+// ---------------------------------------------------------------------------
+// Phases: the awaiters that suspend a worker
+// ---------------------------------------------------------------------------
+namespace {
+
+// What suspending a worker starts with: its count deltas folded into the
+// totals (so counts are exact whenever nobody runs), and where to resume it.
+struct WorkerAwait {
+  EngineState* e;
+  Worker* w;
+  bool await_ready() const noexcept { return false; }
+  void await_resume() const noexcept {}
+  void prepare(std::coroutine_handle<> h) const {
+    e->impl.fold_counters(*w->ctx);
+    w->handle = h;
+  }
+};
+
+struct IdleAwait : WorkerAwait {
+  bool await_suspend(std::coroutine_handle<> h) {
+    prepare(h);
+    // Once `phase` says idle, a submitter may resume us on another thread:
+    // from then on touch only locals (not this awaiter, which lives in the frame).
+    EngineState* es = e;
+    Worker* wk = w;
+    wk->phase.store(WorkerPhase::idle, std::memory_order_seq_cst);
+    es->idle_count.fetch_add(1, std::memory_order_seq_cst);
+    es->active.fetch_sub(1, std::memory_order_seq_cst);
+    es->wake_one();  // an idle worker competes with nobody: let a sleeper run
+    // Work that arrived before we said idle, and whose submitter saw us
+    // running: look once more (the submitter resumes us after this point).
+    if (es->work_for(*wk)) {
+      WorkerPhase expect = WorkerPhase::idle;
+      // Resume as a new task, not by returning false: a submitter may have
+      // resumed and re-suspended this coroutine already, so only the handle is ours.
+      if (wk->phase.compare_exchange_strong(expect, WorkerPhase::running)) {
+        es->idle_count.fetch_sub(1, std::memory_order_seq_cst);
+        es->resume(*wk);
+      }
+    }
+    return true;
+  }
+};
+
+struct SleepAwait : WorkerAwait {
+  bool await_suspend(std::coroutine_handle<> h) {
+    prepare(h);
+    EngineState* es = e;
+    Worker* wk = w;
+    std::lock_guard lock(es->sleep_mutex);
+    if (es->active.load() <= 1) return false;  // the last running worker never sleeps
+    wk->slept_at = std::chrono::steady_clock::now();
+    wk->sleeps.fetch_add(1, std::memory_order_relaxed);
+    wk->phase.store(WorkerPhase::sleeping);
+    es->active.fetch_sub(1);
+    es->sleepers.push_back(wk);  // reserved for every worker: no allocation
+    return true;
+  }
+};
+
+// The world is stopped: wait, suspended, until restart() resumes us. The
+// worker stays `running` (it resumes by itself), holding no block.
+struct WorldAwait {
+  EngineState* e;
+  bool await_ready() const noexcept { return false; }
+  bool await_suspend(std::coroutine_handle<> h) { return e->world.wait(h); }
+  void await_resume() const noexcept {}
+};
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// The worker's body
+// ---------------------------------------------------------------------------
+WorkerCoroutine EngineState::body(Worker& w) {
+  for (;;) {
+    if (world.stopped()) {
+      co_await WorldAwait{this};
+      continue;
+    }
+    Block* b = claim(w);
+    if (!b) {
+      co_await IdleAwait{{this, &w}};
+      continue;
+    }
+    bool sleep = false;
+    for (std::uint32_t served = 0; served < batch && !sleep; ++served) {
+      OpRecord* op = b->queue.pop();
+      if (!op) break;
+      b->queued.fetch_sub(1, std::memory_order_relaxed);
+      const Outcome outcome = execute(w, op);
+      if (outcome == Outcome::rollback || outcome == Outcome::global) {
+        b->queued.fetch_add(1, std::memory_order_relaxed);
+        b->queue.push(op);  // back of its block's queue: the others go first
+      }
+      if (outcome == Outcome::global) break;  // the world is stopped: wait for it
+      maybe_grow_grid(w);
+      using Verdict = ContentionManager::Verdict;
+      switch (w.contention.judge()) {
+        case Verdict::sleep: sleep = true; break;
+        case Verdict::wake_another: wake_one(); break;
+        case Verdict::carry_on: break;
+      }
+    }
+    release(*b);
+    if (sleep) co_await SleepAwait{{this, &w}};
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Claiming blocks
+// ---------------------------------------------------------------------------
+bool EngineState::may_serve(const Worker& w, const Block& b) const {
+  return b.queued.load(std::memory_order_acquire) != 0 && b.holder.load(std::memory_order_relaxed) == -1 &&
+         (opts.stealing || b.home == w.index);
+}
+
+Block* EngineState::claim(Worker& w) {
+  auto try_claim = [&](std::uint32_t i) -> Block* {
+    Block& b = blocks[i];
+    if (!may_serve(w, b)) return nullptr;
+    int expect = -1;
+    if (!b.holder.compare_exchange_strong(expect, static_cast<int>(w.index), std::memory_order_acq_rel)) return nullptr;
+    if (b.queued.load(std::memory_order_acquire) == 0) {  // emptied meanwhile
+      b.holder.store(-1, std::memory_order_release);
+      return nullptr;
+    }
+    return &b;
+  };
+  const std::uint32_t first = partition.home_first(w.index), end = partition.home_first(w.index + 1);
+  const std::uint32_t count = partition.blocks();
+  // Elsewhere, nearest first along the curve. Blocks whose home is not
+  // running (asleep, idle, waiting) before busy homes' blocks.
+  auto steal = [&](bool orphans_only) -> Block* {
+    for (std::uint32_t d = 1; d <= count; ++d) {
+      const std::int64_t near[2] = {std::int64_t{first} - d, std::int64_t{end} - 1 + d};
+      bool any = false;
+      for (std::int64_t i : near) {
+        if (i < 0 || i >= std::int64_t{count}) continue;
+        any = true;
+        const Block& b = blocks[static_cast<std::size_t>(i)];
+        if (orphans_only && workers[b.home]->phase.load(std::memory_order_relaxed) == WorkerPhase::running) continue;
+        if (Block* got = try_claim(static_cast<std::uint32_t>(i))) {
+          w.steals.fetch_add(1, std::memory_order_relaxed);
+          return got;
+        }
+      }
+      if (!any) break;
+    }
+    return nullptr;
+  };
+  // Now and then, orphans first, so a sleeper's blocks are not left waiting
+  // behind a home that always has work.
+  if (opts.stealing && (++w.home_cursor & 3) == 0)
+    if (Block* b = steal(true)) return b;
+  const std::uint32_t n = end - first;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const std::uint32_t i = first + (w.home_cursor + k) % n;
+    if (Block* b = try_claim(i)) return b;
+  }
+  if (!opts.stealing) return nullptr;
+  if (Block* b = steal(true)) return b;
+  return steal(false);
+}
+
+bool EngineState::work_for(const Worker& w) const {
+  for (std::uint32_t i = 0; i < partition.blocks(); ++i)
+    if (may_serve(w, blocks[i])) return true;
+  return false;
+}
+
+void EngineState::release(Block& b) {
+  assert(b.holder.load(std::memory_order_relaxed) >= 0);
+  b.holder.store(-1, std::memory_order_release);
+}
+
+// ---------------------------------------------------------------------------
+// Wake-ups
+// ---------------------------------------------------------------------------
+void EngineState::resume(Worker& w) {
+  active.fetch_add(1, std::memory_order_seq_cst);
+  spawn(w.handle);
+}
+
+void EngineState::enqueue(Block& b, OpRecord* op) {
+  b.queued.fetch_add(1, std::memory_order_seq_cst);
+  b.queue.push(op);
+  Worker& home = *workers[b.home];
+  WorkerPhase expect = WorkerPhase::idle;
+  if (home.phase.compare_exchange_strong(expect, WorkerPhase::running)) {
+    idle_count.fetch_sub(1, std::memory_order_seq_cst);
+    resume(home);
+    return;
+  }
+  // The home is busy (or asleep): an idle worker may take this block over
+  // once it holds a few operations.
+  if (opts.stealing && idle_count.load(std::memory_order_seq_cst) > 0 &&
+      (expect != WorkerPhase::running || b.queued.load(std::memory_order_relaxed) >= 8) && wake_idle())
+    return;
+  if (expect == WorkerPhase::sleeping && active.load(std::memory_order_seq_cst) == 0) {
+    // Nobody runs to wake it: do it here.
+    std::unique_lock lock(sleep_mutex);
+    if (std::find(sleepers.begin(), sleepers.end(), &home) == sleepers.end()) return;
+    wake_locked(home);
+    lock.unlock();
+    resume(home);
+  }
+}
+
+void EngineState::wake_locked(Worker& w) {
+  sleepers.erase(std::find(sleepers.begin(), sleepers.end(), &w));
+  w.seconds_asleep.store(w.seconds_asleep.load() +
+                         std::chrono::duration<double>(std::chrono::steady_clock::now() - w.slept_at).count());
+  w.contention.forget();  // the manager is memoryless (§3.3)
+  w.phase.store(WorkerPhase::running);
+}
+
+bool EngineState::wake_one() {
+  Worker* w = nullptr;
+  {
+    std::lock_guard lock(sleep_mutex);
+    if (sleepers.empty()) return false;
+    w = sleepers.back();
+    wake_locked(*w);
+  }
+  resume(*w);
+  return true;
+}
+
+bool EngineState::wake_idle() {
+  for (auto& w : workers) {
+    WorkerPhase expect = WorkerPhase::idle;
+    if (w->phase.load(std::memory_order_relaxed) == WorkerPhase::idle &&
+        w->phase.compare_exchange_strong(expect, WorkerPhase::running)) {
+      idle_count.fetch_sub(1, std::memory_order_seq_cst);
+      resume(*w);
+      return true;
+    }
+  }
+  return false;
+}
+
+std::uint64_t EngineState::in_flight() const {
+  // finished is read before submitted: finished never exceeds submitted, so
+  // the difference is never negative, and 0 means that when the finished
+  // counts were read, everything submitted until then was done.
+  std::uint64_t finished = 0, submitted = 0;
+  for (const auto& w : workers) finished += w->finished.load(std::memory_order_acquire);
+  for (std::uint32_t i = 0; i < partition.blocks(); ++i) submitted += blocks[i].submitted.load(std::memory_order_acquire);
+  assert(finished <= submitted);
+  return submitted - finished;
+}
+
+bool EngineState::idle_everywhere() const { return in_flight() == 0; }
+
+// ---------------------------------------------------------------------------
+// The jump grid's growth, with the world stopped
+// ---------------------------------------------------------------------------
+void EngineState::ensure_grid() {
+  if (impl.dim.load() < 3) return;  // no grid below dimension 3
+  const std::size_t ids = impl.verts.size();
+  if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) return;
+  // Over the live vertices' bounding box, about two vertices per slot.
+  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)));
+  grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
+}
+
+void EngineState::maybe_grow_grid(Worker& w) {
+  // Below dimension 3 there is no grid; the global step that builds the
+  // tetrahedra sizes it (run_global calls ensure_grid).
+  if (impl.verts.size() < grid_grow_at.load(std::memory_order_relaxed) || impl.dim.load(std::memory_order_relaxed) < 3)
+    return;
+  std::unique_lock<std::mutex> lock;
+  if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too
+  try {
+    ensure_grid();
+  } catch (const std::bad_alloc&) {
+    // The old grid stays (it was built aside); walks are longer, nothing is wrong.
+    grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);
+  }
+  world.restart(lock, [this](std::coroutine_handle<> h) { spawn(h); });
+}
+
+}  // namespace pdt::detail

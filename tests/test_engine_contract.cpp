@@ -1,0 +1,538 @@
+// The engine's contract with its clients (engine.hpp): engines in turn on one
+// triangulation, the refusals that protect an attached triangulation,
+// thread-safe queries, clients that misbehave (rethrowing coroutines,
+// throwing callbacks and hooks, a cancelled parallel_for, destroying the
+// engine from its own callback), and progress for every single operation.
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/task_arena.h>
+
+#include <atomic>
+#include <cmath>
+#include <coroutine>
+#include <mutex>
+#include <random>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/cgal_reference.hpp"
+#include "common/engine_run.hpp"
+#include "common/point_sets.hpp"
+#include "pdt/engine.hpp"
+#include "pdt/error.hpp"
+#include "pdt/triangulation.hpp"
+#include "triangulation_impl.hpp"  // a test holds a vertex lock itself
+
+using namespace pdt_test;
+using pdt::Point3;
+
+namespace {
+
+const pdt::Box kUnit{{0, 0, 0}, {1, 1, 1}};
+
+// A multiset of the points a triangulation should hold, kept beside it.
+struct Expected {
+  std::vector<Point3> points;
+  void erase_one(const Point3& p) {
+    auto it = std::find(points.begin(), points.end(), p);
+    REQUIRE(it != points.end());
+    points.erase(it);
+  }
+};
+
+void require_canonical(const pdt::Triangulation& t, const Expected& e) {
+  require_valid(t);
+  if (e.points.empty()) {
+    REQUIRE(t.number_of_vertices() == 0);
+    return;
+  }
+  require_same_as_cgal(t, e.points);
+  std::uint64_t m = 0;
+  for (pdt::VertexId v : t.vertices()) m += t.multiplicity(v);
+  REQUIRE(m == e.points.size());
+}
+
+Detached nearest_of(pdt::Engine& e, Point3 q, std::atomic<pdt::VertexId>& out) {
+  out.store(co_await e.nearest_vertex(q));
+}
+
+std::string what_of(std::exception_ptr e) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const std::exception& x) {
+    return x.what();
+  } catch (...) {
+    return "?";
+  }
+}
+
+}  // namespace
+
+// =============================================================================
+// 1. Engines in turn; an attached triangulation is the engine's
+// =============================================================================
+TEST_CASE("contract: any number of engines in turn, with sequential work and clear() between", "[engine][contract][tsan]") {
+  pdt::Triangulation t;
+  Expected expected;
+  std::mt19937_64 rng(5);
+  std::set<std::uint64_t> incarnations;  // every vertex incarnation ever handed out: never twice
+  auto note = [&](const pdt::InsertResult& r) {
+    if (r.inserted) REQUIRE(incarnations.insert(r.incarnation).second);
+  };
+  std::vector<pdt::VertexHandle> gone;  // handles of removed vertices: must stay dead
+  const unsigned worker_counts[] = {1, 2, 3, 8, 16};
+  const std::size_t per_round = scaled(600, 150);
+  for (int round = 0; round < 12; ++round) {
+    INFO("round " << round);
+    const unsigned workers = worker_counts[round % 5];
+    // An engine inserts (one at a time and as a batch) and removes by handle.
+    {
+      tbb::task_arena arena(2);
+      std::vector<pdt::InsertResult> results;
+      std::atomic<int> errors{0};
+      std::mutex m;
+      arena.execute([&] {
+        pdt::Engine e(t, kUnit, options_with(workers));
+        const std::vector<Point3> pts = random_points(per_round, 100 + round);
+        auto keep = [&](const pdt::OpResult& r) {  // on a worker: no Catch2 here
+          if (r.error) errors.fetch_add(1);
+          std::lock_guard lock(m);
+          results.push_back(r.insert);
+        };
+        for (std::size_t i = 0; i < pts.size() / 2; ++i) e.insert(pts[i], keep);
+        e.insert_batch(std::span<const Point3>(pts).subspan(pts.size() / 2), keep);
+        e.drain();
+        for (const Point3& p : pts) expected.points.push_back(p);
+        for (const auto& r : results) note(r);
+        // Remove a third of them by handle.
+        std::vector<pdt::VertexHandle> doomed;
+        for (std::size_t i = 0; i < results.size(); i += 3) {
+          doomed.push_back(results[i].handle());
+          expected.erase_one(t.point(results[i].vertex));  // read before any removal runs
+        }
+        for (const pdt::VertexHandle& h : doomed) {
+          e.remove(h, [&](const pdt::OpResult& r) {
+            if (r.error) errors.fetch_add(1);
+          });
+          gone.push_back(h);
+        }
+        e.drain();
+      });
+      REQUIRE(errors.load() == 0);
+    }
+    require_canonical(t, expected);
+    for (const pdt::VertexHandle& h : gone) REQUIRE_FALSE(t.is_vertex(h));
+    // Sequential work between engines.
+    for (int k = 0; k < 50; ++k) {
+      const Point3 p{std::uniform_real_distribution<double>(0, 1)(rng), std::uniform_real_distribution<double>(0, 1)(rng), 0.5};
+      note(t.insert(p));
+      expected.points.push_back(p);
+    }
+    const std::vector<pdt::VertexId> vs = t.vertices();
+    for (std::size_t k = 0; k < 20 && k < vs.size(); ++k) {
+      const pdt::VertexHandle h = t.vertex_handle(vs[k * 7 % vs.size()]);
+      if (!t.is_vertex(h)) continue;
+      const Point3 p = t.point(h.id);
+      t.remove(h);
+      gone.push_back(h);
+      expected.erase_one(p);
+    }
+    require_canonical(t, expected);
+    if (round % 4 == 3) {
+      t.clear();
+      expected.points.clear();
+      REQUIRE(t.number_of_vertices() == 0);
+    }
+  }
+}
+
+TEST_CASE("contract: an attached triangulation refuses mutation, and a second engine", "[engine][contract]") {
+  pdt::Triangulation t;
+  for (const Point3& p : random_points(200, 1)) t.insert(p);
+  const pdt::VertexId v = t.vertices().front();
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(2));
+    std::string why;
+    auto refused = [&](auto f) {
+      why.clear();
+      const auto code = error_of(f, &why);
+      INFO(why);
+      REQUIRE(code == pdt::ErrorCode::invalid_argument);
+      REQUIRE(why.find("Engine is attached") != std::string::npos);
+    };
+    refused([&] { t.insert({0.5, 0.5, 0.5}); });
+    refused([&] { t.insert_batch(random_points(10, 2)); });
+    refused([&] { t.remove(v); });
+    refused([&] { t.clear(); });
+    refused([&] { t.set_change_hook([](const pdt::Changes&) {}); });
+    refused([&] { pdt::Triangulation moved(std::move(t)); });
+    refused([&] {
+      pdt::Triangulation other;
+      other = std::move(t);
+    });
+    refused([&] {
+      pdt::Triangulation other;
+      t = std::move(other);
+    });
+    REQUIRE(error_of([&] { pdt::Engine second(t, kUnit, options_with(2)); }, &why) ==
+            pdt::ErrorCode::invalid_argument);
+    REQUIRE(why.find("another Engine is attached") != std::string::npos);
+    // The engine still works, and the triangulation is what it was plus it.
+    e.insert({0.25, 0.25, 0.25}, {});
+    e.drain();
+  });
+  REQUIRE(t.number_of_vertices() == 201);
+  require_valid(t);
+  t.insert({0.75, 0.75, 0.75});  // detached again: allowed
+  REQUIRE(t.number_of_vertices() == 202);
+}
+
+TEST_CASE("contract: a moved-from triangulation is empty and usable", "[engine][contract]") {
+  pdt::Triangulation a;
+  for (const Point3& p : random_points(100, 3)) a.insert(p);
+  pdt::Triangulation b(std::move(a));
+  REQUIRE(b.number_of_vertices() == 100);
+  REQUIRE(a.number_of_vertices() == 0);
+  a.insert({0.5, 0.5, 0.5});
+  REQUIRE(a.number_of_vertices() == 1);
+  require_valid(a);
+  require_valid(b);
+}
+
+// =============================================================================
+// 2. Queries from many threads
+// =============================================================================
+TEST_CASE("contract: const queries from a parallel_for agree with one thread", "[engine][contract][tsan]") {
+  pdt::Triangulation t;
+  t.insert_batch(random_points(scaled(50000, 5000), 7));
+  const std::vector<Point3> qs = random_points(scaled(40000, 4000), 8, -0.1, 1.1);
+  std::vector<pdt::VertexId> want(qs.size());
+  std::vector<pdt::LocateResult> want_loc(qs.size());
+  for (std::size_t i = 0; i < qs.size(); ++i) {
+    want[i] = t.nearest_vertex(qs[i]);
+    want_loc[i] = t.locate(qs[i]);
+  }
+  for (int round = 0; round < 3; ++round) {
+    std::vector<pdt::VertexId> got(qs.size());
+    std::vector<pdt::LocateResult> got_loc(qs.size());
+    tbb::task_arena arena(4);
+    arena.execute([&] {
+      tbb::parallel_for(std::size_t{0}, qs.size(), [&](std::size_t i) {
+        got[i] = t.nearest_vertex(qs[i]);
+        got_loc[i] = t.locate(qs[i]);
+      });
+    });
+    std::size_t bad = 0;
+    for (std::size_t i = 0; i < qs.size(); ++i) {
+      // A tie between equidistant vertices may resolve either way; the distance may not.
+      auto d2 = [&](pdt::VertexId v) {
+        const Point3 p = t.point(v);
+        return (p.x - qs[i].x) * (p.x - qs[i].x) + (p.y - qs[i].y) * (p.y - qs[i].y) + (p.z - qs[i].z) * (p.z - qs[i].z);
+      };
+      if (got[i] == pdt::no_vertex || d2(got[i]) != d2(want[i])) ++bad;
+      if (got_loc[i].kind != want_loc[i].kind) ++bad;
+    }
+    REQUIRE(bad == 0);
+  }
+}
+
+TEST_CASE("contract: the engine's locate, nearest_vertex and visit while it works", "[engine][contract][tsan]") {
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  const std::vector<Point3> pts = random_points(scaled(4000, 800), 21);
+  std::mutex m;
+  std::vector<pdt::CellHandle> made;
+  std::atomic<int> located{0}, nearest{0}, visited_alive{0}, visited_dead{0}, visitor_calls{0};
+  std::vector<std::string> failures;
+  auto fail = [&](const std::string& s) {
+    std::lock_guard lock(m);
+    failures.push_back(s);
+  };
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(4));
+    e.set_change_hook([&](const pdt::Changes& c) {
+      std::lock_guard lock(m);
+      for (const pdt::CellView& v : c.created)
+        if (v.finite()) made.push_back(v.handle);
+    });
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      e.insert(pts[i], {});
+      if (i % 7 == 0)
+        e.locate(pts[i], [&](const pdt::OpResult& r) {
+          if (r.error || r.kind != pdt::OpKind::locate) return fail("locate failed");
+          located.fetch_add(1);
+        });
+      if (i % 11 == 0)
+        e.nearest_vertex(pts[i], [&](const pdt::OpResult& r) {
+          if (r.error || r.kind != pdt::OpKind::nearest_vertex) return fail("nearest_vertex failed");
+          nearest.fetch_add(1);
+        });
+    }
+    e.drain();
+    // Now every handle is either alive or dead, and visit says which.
+    std::vector<pdt::CellHandle> handles;
+    {
+      std::lock_guard lock(m);
+      handles = made;
+    }
+    REQUIRE(handles.size() > pts.size());
+    for (const pdt::CellHandle& h : handles)
+      e.visit(
+          h,
+          [&, h](const pdt::CellView& v) {
+            visitor_calls.fetch_add(1);
+            if (v.handle != h) fail("visit gave another cell");
+          },
+          [&](const pdt::OpResult& r) {
+            if (r.error) return fail("visit failed: " + what_of(r.error));
+            (r.alive ? visited_alive : visited_dead).fetch_add(1);
+          });
+    e.drain();
+    // After drain the sequential answer is the engine's.
+    std::size_t alive = 0;
+    for (const pdt::CellHandle& h : handles) alive += t.cell(h).has_value();
+    REQUIRE(visited_alive.load() == static_cast<int>(alive));
+    REQUIRE(visited_dead.load() == static_cast<int>(handles.size() - alive));
+    REQUIRE(visitor_calls.load() == static_cast<int>(alive));
+    REQUIRE(alive == t.number_of_finite_cells());
+    // Engine and sequential nearest agree (up to ties).
+    const std::vector<Point3> qs = random_points(200, 22);
+    std::vector<std::atomic<pdt::VertexId>> got(qs.size());
+    for (std::size_t i = 0; i < qs.size(); ++i) nearest_of(e, qs[i], got[i]);
+    e.drain();
+    for (std::size_t i = 0; i < qs.size(); ++i) {
+      const Point3 a = t.point(got[i].load()), b = t.point(t.nearest_vertex(qs[i]));
+      auto d2 = [&](const Point3& p) {
+        return (p.x - qs[i].x) * (p.x - qs[i].x) + (p.y - qs[i].y) * (p.y - qs[i].y) + (p.z - qs[i].z) * (p.z - qs[i].z);
+      };
+      REQUIRE(d2(a) == d2(b));
+    }
+  });
+  const std::string first_failure = failures.empty() ? std::string() : failures.front();
+  INFO(first_failure);
+  REQUIRE(failures.empty());
+  REQUIRE(located.load() > 0);
+  REQUIRE(nearest.load() > 0);
+}
+
+// =============================================================================
+// 3. Clients that misbehave neither kill nor hang the engine
+// =============================================================================
+namespace {
+
+// An eager coroutine type whose promise rethrows, as many do.
+struct Rethrowing {
+  struct promise_type {
+    Rethrowing get_return_object() noexcept { return {}; }
+    std::suspend_never initial_suspend() noexcept { return {}; }
+    std::suspend_never final_suspend() noexcept { return {}; }
+    void return_void() noexcept {}
+    void unhandled_exception() { throw; }
+  };
+};
+
+// The first co_await is fine; the second (resumed by the engine, on a worker)
+// throws: the point is outside the domain.
+Rethrowing insert_then_stray(pdt::Engine& e, Point3 p, std::atomic<int>& reached) {
+  (void)co_await e.insert(p);
+  reached.fetch_add(1);
+  (void)co_await e.insert({2, 2, 2});
+  reached.fetch_add(100);  // never
+}
+
+}  // namespace
+
+TEST_CASE("contract: a rethrowing coroutine, throwing callbacks and hooks: drain() rethrows, nothing is lost",
+          "[engine][contract][tsan]") {
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  const std::vector<Point3> pts = random_points(scaled(2000, 400), 31);
+  std::atomic<int> reached{0}, callbacks{0};
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(4));
+    // Coroutines that throw from a worker, through a rethrowing promise.
+    for (std::size_t i = 0; i < 20; ++i) insert_then_stray(e, pts[i], reached);
+    std::string why;
+    REQUIRE(error_of([&] { e.drain(); }, &why) == pdt::ErrorCode::outside_domain);
+    e.drain();  // rethrown once: the next drain is clean
+    REQUIRE(reached.load() == 20);
+    REQUIRE(e.stats().client_errors == 20);
+    // Callbacks that throw, one in ten.
+    for (std::size_t i = 20; i < pts.size(); ++i)
+      e.insert(pts[i], [&, i](const pdt::OpResult&) {
+        callbacks.fetch_add(1);
+        if (i % 10 == 0) throw std::runtime_error("callback " + std::to_string(i));
+      });
+    REQUIRE_THROWS_AS(e.drain(), std::runtime_error);
+    e.drain();
+    REQUIRE(callbacks.load() == static_cast<int>(pts.size() - 20));
+    // A hook that throws: the operations still complete.
+    e.set_change_hook([](const pdt::Changes&) { throw std::logic_error("hook"); });
+    for (const Point3& p : random_points(100, 32)) e.insert(p, {});
+    REQUIRE_THROWS_AS(e.drain(), std::logic_error);
+    e.drain();
+    REQUIRE(e.stats().total().completed == pts.size() + 100);
+  });
+  REQUIRE(t.number_of_vertices() == pts.size() + 100);
+  require_valid(t);
+}
+
+TEST_CASE("contract: submitting from a parallel_for that throws does not cancel the engine", "[engine][contract][tsan]") {
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  const std::vector<Point3> pts = random_points(scaled(3000, 600), 41);
+  std::atomic<int> done{0};
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(4));
+    std::atomic<int> submitted{0};
+    REQUIRE_THROWS_AS(tbb::parallel_for(std::size_t{0}, pts.size(),
+                                        [&](std::size_t i) {
+                                          e.insert(pts[i], [&](const pdt::OpResult& r) {
+                                            if (!r.error) done.fetch_add(1);
+                                          });
+                                          submitted.fetch_add(1);
+                                          if (i == pts.size() / 2) throw std::runtime_error("body");
+                                        }),
+                      std::runtime_error);
+    e.drain();  // returns: the engine's tasks were not cancelled
+    REQUIRE(done.load() == submitted.load());
+    // And it goes on working.
+    e.insert({0.5, 0.5, 0.25}, {});
+    e.drain();
+  });
+  require_valid(t);
+  REQUIRE(t.number_of_vertices() == static_cast<std::size_t>(done.load()) + 1);
+}
+
+TEST_CASE("contract: destroying the engine or draining from its own callback is refused", "[engine][contract]") {
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    auto* e = new pdt::Engine(t, kUnit, options_with(2));
+    std::string drain_why, delete_why;
+    e->insert({0.5, 0.5, 0.5}, [&](const pdt::OpResult&) {
+      try {
+        e->drain();
+      } catch (const pdt::Error& err) {
+        drain_why = err.what();
+      }
+      try {
+        delete e;  // refused: throws, the engine stays (leaked on purpose)
+      } catch (const pdt::Error& err) {
+        delete_why = err.what();
+      }
+    });
+    // The engine object is gone (delete freed it after its destructor threw),
+    // its state lives on: wait for the callback through the triangulation.
+    for (int k = 0; k < 2000 && delete_why.empty(); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    REQUIRE(drain_why.find("would wait for itself") != std::string::npos);
+    REQUIRE(delete_why.find("destroyed from one of its own callbacks") != std::string::npos);
+  });
+}
+
+// =============================================================================
+// 4. Progress for every operation: escalation after escalate_after rollbacks
+// =============================================================================
+TEST_CASE("contract: the apex of a cone is removed amid insertions around it, within escalate_after rollbacks",
+          "[engine][contract][tsan]") {
+  // The apex at the centre of ~5,000 points on a sphere: its star is every
+  // finite cell (~10,000) and its link all the sphere's points. Insertions
+  // around the sphere keep taking locks its removal needs, so it would be
+  // rolled back again and again.
+  pdt::Triangulation t;
+  const std::size_t n_sphere = scaled(5000, 1000);
+  std::mt19937_64 rng(51);
+  std::normal_distribution<double> g(0, 1);
+  std::vector<Point3> sphere;
+  for (std::size_t i = 0; i < n_sphere; ++i) {
+    double x = g(rng), y = g(rng), z = g(rng);
+    const double r = std::sqrt(x * x + y * y + z * z);
+    sphere.push_back({0.5 + 0.45 * x / r, 0.5 + 0.45 * y / r, 0.5 + 0.45 * z / r});
+  }
+  t.insert_batch(sphere);
+  const pdt::InsertResult apex = t.insert({0.5, 0.5, 0.5});
+  // Insertions in a thin shell just outside the sphere: each one's cavity
+  // holds sphere points (the apex's link) exclusively for a moment, without
+  // touching the apex's star.
+  const std::vector<Point3> inside = [&] {
+    std::vector<Point3> v;
+    std::uniform_real_distribution<double> radius(0.46, 0.5);
+    while (v.size() < scaled(4000, 800)) {
+      double x = g(rng), y = g(rng), z = g(rng);
+      const double r = std::sqrt(x * x + y * y + z * z), k = radius(rng) / r;
+      v.push_back({0.5 + k * x, 0.5 + k * y, 0.5 + k * z});
+    }
+    return v;
+  }();
+  pdt::OpResult removal;
+  std::atomic<bool> removed{false};
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::EngineOptions o = options_with(16);
+    o.escalate_after = 16;
+    pdt::Engine e(t, kUnit, o);
+    std::size_t next = 0;
+    for (; next < inside.size() / 4; ++next) e.insert(inside[next], {});
+    e.remove(apex.handle(), [&](const pdt::OpResult& r) {
+      removal = r;
+      removed.store(true);
+    });
+    for (; next < inside.size(); ++next) e.insert(inside[next], {});  // steady insertions around it
+    e.drain();
+  });
+  REQUIRE(removed.load());
+  INFO("the apex removal was rolled back " << removal.rollbacks << " times (escalated: " << removal.escalated << ")");
+  REQUIRE_FALSE(removal.error);
+  REQUIRE(removal.remove == pdt::RemoveResult::removed);
+  REQUIRE(removal.rollbacks <= 16);
+  REQUIRE_FALSE(t.is_vertex(apex.handle()));
+  std::vector<Point3> all = sphere;
+  all.insert(all.end(), inside.begin(), inside.end());
+  require_valid(t);
+  require_same_as_cgal(t, all);
+}
+
+TEST_CASE("contract: an operation blocked escalate_after times runs with the world stopped", "[engine][contract][tsan]") {
+  // Deterministic: the test holds one vertex's lock, so its removal can only
+  // roll back; after escalate_after tries it runs alone and completes.
+  pdt::Triangulation t;
+  const std::vector<Point3> base = random_points(scaled(2000, 400), 61);
+  insert_all(t, base);
+  const pdt::VertexHandle victim = t.vertex_handle(t.nearest_vertex({0.5, 0.5, 0.5}));
+  const Point3 victim_point = t.point(victim.id);
+  const std::vector<Point3> more = random_points(scaled(2000, 400), 62);
+  pdt::EngineOptions o = options_with(4);
+  o.escalate_after = 5;
+  pdt::detail::OpContext holder(999, true);
+  pdt::OpResult removal;
+  std::atomic<bool> done{false};
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, o);
+    REQUIRE(pdt::detail::impl_of(t).lock_exclusive(holder, victim.id));
+    e.remove(victim, [&](const pdt::OpResult& r) {
+      removal = r;
+      done.store(true);
+    });
+    for (const Point3& p : more) e.insert(p, {});
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (!done.load() && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+    REQUIRE(done.load());  // completed while the lock was still held: it ran alone
+    pdt::detail::impl_of(t).release_all(holder);
+    e.drain();
+    REQUIRE(e.stats().total().escalated >= 1);  // insertions next to the held vertex escalate too
+  });
+  REQUIRE_FALSE(removal.error);
+  REQUIRE(removal.escalated);
+  REQUIRE(removal.rollbacks == 5);
+  REQUIRE_FALSE(t.is_vertex(victim));
+  std::vector<Point3> expected;
+  for (const Point3& p : base)
+    if (!(p == victim_point)) expected.push_back(p);
+  expected.insert(expected.end(), more.begin(), more.end());
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+}

@@ -246,6 +246,14 @@ InsertAwaitable Engine::insert(const Point3& p) {
   return a;
 }
 
+InsertAwaitable Engine::insert_if_alive(const Point3& p, CellHandle h) {
+  auto a = request<InsertAwaitable>(this, OpKind::insert);
+  a.request.point = p;
+  a.request.cell = h;
+  a.request.only_if_alive = true;
+  return a;
+}
+
 RemoveAwaitable Engine::remove(VertexId v) { return remove(VertexHandle{v, 0}); }
 
 RemoveAwaitable Engine::remove(VertexHandle v) {
@@ -279,7 +287,17 @@ namespace detail {
 // for bad input, having submitted nothing.
 OpRecord* make_record(EngineState& e, Request& q) {
   switch (q.kind) {
-    case OpKind::insert: return e.make_insert(q.point);
+    case OpKind::insert: {
+      if (!q.only_if_alive) return e.make_insert(q.point);
+      require_finite(q.point);
+      require_inside(q.point, e.domain);
+      OpRecord* op = e.records.acquire();
+      op->kind = OpKind::insert;
+      op->point = q.point;
+      op->cell = q.cell;
+      op->only_if_alive = true;
+      return op;
+    }
     case OpKind::remove: return e.make_remove(q.vertex);
     case OpKind::locate:
     case OpKind::nearest_vertex: {
@@ -329,6 +347,13 @@ Engine::Ticket Engine::insert(const Point3& p, Callback done) {
   return t;
 }
 
+void Engine::insert_if_alive(const Point3& p, CellHandle h, Callback done) {
+  detail::Request q{OpKind::insert, p, {}, h, {}, true};
+  OpRecord* op = detail::make_record(*state_, q);
+  op->done = std::move(done);
+  state_->submit(op);
+}
+
 void Engine::remove(VertexId v, Callback done) { remove(VertexHandle{v, 0}, std::move(done)); }
 
 void Engine::remove(VertexHandle v, Callback done) {
@@ -338,21 +363,21 @@ void Engine::remove(VertexHandle v, Callback done) {
 }
 
 void Engine::locate(const Point3& p, Callback done) {
-  detail::Request q{OpKind::locate, p, {}, {}, {}};
+  detail::Request q{OpKind::locate, p, {}, {}, {}, false};
   OpRecord* op = detail::make_record(*state_, q);
   op->done = std::move(done);
   state_->submit(op);
 }
 
 void Engine::nearest_vertex(const Point3& p, Callback done) {
-  detail::Request q{OpKind::nearest_vertex, p, {}, {}, {}};
+  detail::Request q{OpKind::nearest_vertex, p, {}, {}, {}, false};
   OpRecord* op = detail::make_record(*state_, q);
   op->done = std::move(done);
   state_->submit(op);
 }
 
 void Engine::visit(CellHandle h, CellVisitor fn, Callback done) {
-  detail::Request q{OpKind::visit, {}, {}, h, std::move(fn)};
+  detail::Request q{OpKind::visit, {}, {}, h, std::move(fn), false};
   OpRecord* op = detail::make_record(*state_, q);
   op->done = std::move(done);
   state_->submit(op);

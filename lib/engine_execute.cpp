@@ -17,11 +17,11 @@ OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& 
     case OpKind::insert: {
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
-      const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out);
+      const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);
       if (s == OpStatus::done) {
         r.insert = out.result;
         stamp = out.stamp;
-        w.last_inserted = out.result.vertex;
+        if (out.result.vertex != no_vertex) w.last_inserted = out.result.vertex;
       }
       return s;
     }
@@ -156,8 +156,8 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
   OpRecord& op = *opp;
   r.kind = op.kind;
   r.rollbacks = op.rollbacks;
-  if (op.kind == OpKind::insert || op.kind == OpKind::remove_insertion) r.ticket = op.ticket;
-  if (op.kind == OpKind::insert) {
+  if ((op.kind == OpKind::insert && !op.only_if_alive) || op.kind == OpKind::remove_insertion) r.ticket = op.ticket;
+  if (op.kind == OpKind::insert && !op.only_if_alive) {
     OpRecord* undo = r.error ? tickets.finish_failed(op.ticket, r.error)
                              : tickets.finish_inserted(op.ticket, r.insert.vertex, r.insert.inserted, stamp);
     if (undo) {

@@ -22,7 +22,21 @@ std::uint64_t edge_key(VertexId a, VertexId b) {
 
 }  // namespace
 
-OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out) {
+OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
+                                     const CellHandle* only_if_alive) {
+  if (only_if_alive) {
+    // No cell lives below dimension 3; otherwise the cell's anchor, held from
+    // here on, keeps it as it is until the insertion is done.
+    bool alive = false;
+    if (dim.load(std::memory_order_acquire) == 3 && hold_cell(ctx, *only_if_alive, &alive) == OpStatus::rollback)
+      return OpStatus::rollback;
+    if (!alive) {
+      release_all(ctx);
+      out = {};
+      return OpStatus::done;
+    }
+    hint = only_if_alive->anchor;  // and a walk start next to it
+  }
   if (dim.load(std::memory_order_acquire) < 3) {
     if (ctx.locking) return OpStatus::needs_global;
     out.result = insert_flat(ctx, p);

@@ -247,8 +247,7 @@ OpStatus Triangulation::Impl::nearest_vertex(OpContext& ctx, const KPoint& q, Ve
   return OpStatus::done;
 }
 
-OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* alive, CellView* view,
-                                        const std::function<void(const CellView&)>* while_held) const {
+OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* alive) const {
   Impl& self = *const_cast<Impl*>(this);
   *alive = false;
   if (h.anchor == 0 || h.anchor >= verts.size() || h.id >= cells.size()) return OpStatus::done;
@@ -261,21 +260,27 @@ OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* aliv
   if (verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3) {
     self.collect_star(ctx, h.anchor, ctx.small_star);
     for (CellId c : ctx.small_star)
-      if (c == h.id && incarnation(c) == h.incarnation) {
-        *alive = true;
-        CellView local;
-        CellView& out = view ? *view : local;
-        fill_view(c, out);
-        if (while_held && *while_held) {
-          try {
-            (*while_held)(out);
-          } catch (...) {
-            self.release_all(ctx);
-            throw;
-          }
-        }
-        break;
+      if (c == h.id && incarnation(c) == h.incarnation) *alive = true;
+  }
+  return OpStatus::done;
+}
+
+OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* alive, CellView* view,
+                                        const std::function<void(const CellView&)>* while_held) const {
+  Impl& self = *const_cast<Impl*>(this);
+  if (hold_cell(ctx, h, alive) == OpStatus::rollback) return OpStatus::rollback;
+  if (*alive) {
+    CellView local;
+    CellView& out = view ? *view : local;
+    fill_view(h.id, out);
+    if (while_held && *while_held) {
+      try {
+        (*while_held)(out);
+      } catch (...) {
+        self.release_all(ctx);
+        throw;
       }
+    }
   }
   self.release_all(ctx);
   return OpStatus::done;

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include <zlib.h>
+
 #include "io_util.hpp"
 #include "pdt/error.hpp"
 #include "pdt/io.hpp"
@@ -100,73 +102,216 @@ void write_tetgen(const std::string& path, const Mesh& mesh) {
   ele.commit();
 }
 
-void write_vtu(const std::string& path, const Mesh& mesh) {
-  check_indices(mesh, "write_vtu");
-  detail::OutputFile out(path);
+namespace {
+
+// One DataArray's bytes in the appended section, as VTK reads them: a UInt64
+// byte count then the data (raw), or zlib blocks of 32 KiB with their header
+// (count, block size, last block's size, compressed sizes), as ParaView writes.
+std::string encode_appended(const void* data, std::size_t bytes, VtuEncoding encoding) {
+  const auto* in = static_cast<const unsigned char*>(data);
+  auto put_u64 = [](std::string& out, std::uint64_t v) {
+    for (int b = 0; b < 8; ++b) out += static_cast<char>((v >> (8 * b)) & 0xFF);
+  };
+  std::string out;
+  if (encoding == VtuEncoding::raw) {
+    out.reserve(8 + bytes);
+    put_u64(out, bytes);
+    out.append(reinterpret_cast<const char*>(in), bytes);
+    return out;
+  }
+  constexpr std::size_t block = 32768;
+  const std::size_t blocks = bytes == 0 ? 0 : (bytes + block - 1) / block;
+  std::vector<std::string> packed(blocks);
+  std::vector<unsigned char> buf(compressBound(block));
+  for (std::size_t b = 0; b < blocks; ++b) {
+    const std::size_t n = std::min(block, bytes - b * block);
+    uLongf len = static_cast<uLongf>(buf.size());
+    if (compress2(buf.data(), &len, in + b * block, static_cast<uLong>(n), 6) != Z_OK)
+      throw Error(ErrorCode::io_failure, "write_vtu: zlib failed to compress the data");
+    packed[b].assign(reinterpret_cast<const char*>(buf.data()), len);
+  }
+  put_u64(out, blocks);
+  put_u64(out, block);
+  put_u64(out, blocks ? bytes - (blocks - 1) * block : 0);
+  for (const std::string& p : packed) put_u64(out, p.size());
+  for (const std::string& p : packed) out += p;
+  return out;
+}
+
+void put_ascii_doubles(detail::OutputFile& out, const double* v, std::size_t n, std::size_t per_line) {
   std::string s;
-  s.reserve(256);
-  s = "<?xml version=\"1.0\"?>\n"
-      "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
-      "  <UnstructuredGrid>\n"
-      "    <Piece NumberOfPoints=\"";
+  for (std::size_t i = 0; i < n; i += per_line) {
+    s = "         ";
+    for (std::size_t j = i; j < std::min(n, i + per_line); ++j) {
+      s += ' ';
+      detail::append_double(s, v[j]);
+    }
+    s += '\n';
+    out.put(s);
+  }
+}
+
+template <class T>
+void put_ascii_ints(detail::OutputFile& out, const T* v, std::size_t n, std::size_t per_line) {
+  std::string s;
+  for (std::size_t i = 0; i < n; i += per_line) {
+    s = "         ";
+    for (std::size_t j = i; j < std::min(n, i + per_line); ++j) {
+      s += ' ';
+      detail::append_uint(s, static_cast<std::uint64_t>(v[j]));
+    }
+    s += '\n';
+    out.put(s);
+  }
+}
+
+}  // namespace
+
+void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, std::span<const CellField> cell_fields) {
+  check_indices(mesh, "write_vtu");
+  for (const CellField& f : cell_fields)
+    if (f.values.size() != mesh.tets.size())
+      throw Error(ErrorCode::invalid_argument, "write_vtu: cell field '" + f.name + "' has " +
+                                                   std::to_string(f.values.size()) + " values for " +
+                                                   std::to_string(mesh.tets.size()) + " tetrahedra");
+  // The arrays as VTK holds them (points as 3 doubles, connectivity and
+  // offsets as Int64, types as UInt8: 10 = VTK_TETRA, whose point order
+  // (0,1,2 counter-clockwise seen from 3) is the positive orientation the
+  // mesh uses).
+  std::vector<double> xyz;
+  xyz.reserve(3 * mesh.points.size());
+  for (const Point3& p : mesh.points) xyz.insert(xyz.end(), {p.x, p.y, p.z});
+  std::vector<std::int64_t> conn, offsets;
+  conn.reserve(4 * mesh.tets.size());
+  offsets.reserve(mesh.tets.size());
+  for (std::size_t i = 0; i < mesh.tets.size(); ++i) {
+    for (std::uint32_t v : mesh.tets[i]) conn.push_back(v);
+    offsets.push_back(static_cast<std::int64_t>(4 * (i + 1)));
+  }
+  const std::vector<std::uint8_t> types(mesh.tets.size(), 10);
+
+  struct Array {
+    const char* type;
+    std::string name;  // empty: none
+    int components;
+    const void* data;
+    std::size_t count;  // values
+    std::size_t size;   // bytes per value
+  };
+  std::vector<Array> arrays = {{"Float64", "", 3, xyz.data(), xyz.size(), 8},
+                               {"Int64", "connectivity", 1, conn.data(), conn.size(), 8},
+                               {"Int64", "offsets", 1, offsets.data(), offsets.size(), 8},
+                               {"UInt8", "types", 1, types.data(), types.size(), 1}};
+  for (const CellField& f : cell_fields) arrays.push_back({"Float64", f.name, 1, f.values.data(), f.values.size(), 8});
+
+  std::vector<std::string> encoded;
+  std::vector<std::uint64_t> offset_of;
+  if (encoding != VtuEncoding::ascii) {
+    std::uint64_t at = 0;
+    for (const Array& a : arrays) {
+      encoded.push_back(encode_appended(a.data, a.count * a.size, encoding));
+      offset_of.push_back(at);
+      at += encoded.back().size();
+    }
+  }
+  auto header = [&](std::size_t k) {
+    const Array& a = arrays[k];
+    std::string s = std::string("<DataArray type=\"") + a.type + "\"";
+    if (!a.name.empty()) s += " Name=\"" + a.name + "\"";
+    if (a.components != 1) s += " NumberOfComponents=\"" + std::to_string(a.components) + "\"";
+    if (encoding == VtuEncoding::ascii) return s + " format=\"ascii\">\n";
+    return s + " format=\"appended\" offset=\"" + std::to_string(offset_of[k]) + "\"/>\n";
+  };
+  auto body = [&](detail::OutputFile& out, std::size_t k) {
+    if (encoding != VtuEncoding::ascii) return;
+    const Array& a = arrays[k];
+    if (std::string(a.type) == "Float64")
+      put_ascii_doubles(out, static_cast<const double*>(a.data), a.count, a.components == 3 ? 3 : 6);
+    else if (std::string(a.type) == "Int64")
+      put_ascii_ints(out, static_cast<const std::int64_t*>(a.data), a.count, k == 1 ? 4 : 8);
+    else
+      put_ascii_ints(out, static_cast<const std::uint8_t*>(a.data), a.count, 32);
+    out.put("        </DataArray>\n");
+  };
+
+  detail::OutputFile out(path);
+  std::string s = "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\"";
+  if (encoding == VtuEncoding::zlib) s += " compressor=\"vtkZLibDataCompressor\"";
+  s += ">\n  <UnstructuredGrid>\n    <Piece NumberOfPoints=\"";
   detail::append_uint(s, mesh.points.size());
   s += "\" NumberOfCells=\"";
   detail::append_uint(s, mesh.tets.size());
-  s += "\">\n"
-       "      <Points>\n"
-       "        <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  s += "\">\n      <Points>\n        " + header(0);
   out.put(s);
-  for (const Point3& p : mesh.points) {
-    s = "          ";
-    detail::append_double(s, p.x);
-    s += ' ';
-    detail::append_double(s, p.y);
-    s += ' ';
-    detail::append_double(s, p.z);
-    s += '\n';
-    out.put(s);
+  body(out, 0);
+  out.put("      </Points>\n      <Cells>\n");
+  for (std::size_t k = 1; k <= 3; ++k) {
+    out.put("        " + header(k));
+    body(out, k);
   }
-  out.put("        </DataArray>\n"
-          "      </Points>\n"
-          "      <Cells>\n"
-          "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-  for (const auto& t : mesh.tets) {
-    s = "          ";
-    for (int i = 0; i < 4; ++i) {
-      if (i) s += ' ';
-      detail::append_uint(s, t[i]);
+  out.put("      </Cells>\n");
+  if (!cell_fields.empty()) {
+    out.put("      <CellData Scalars=\"" + cell_fields.front().name + "\">\n");
+    for (std::size_t k = 4; k < arrays.size(); ++k) {
+      out.put("        " + header(k));
+      body(out, k);
     }
-    s += '\n';
-    out.put(s);
+    out.put("      </CellData>\n");
   }
-  out.put("        </DataArray>\n"
-          "        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-  // Offsets: the end of each cell's run in the connectivity array.
-  for (std::size_t i = 0; i < mesh.tets.size(); i += 8) {
-    s = "         ";
-    for (std::size_t j = i; j < std::min(mesh.tets.size(), i + 8); ++j) {
-      s += ' ';
-      detail::append_uint(s, 4 * (j + 1));
-    }
-    s += '\n';
-    out.put(s);
+  out.put("    </Piece>\n  </UnstructuredGrid>\n");
+  if (encoding != VtuEncoding::ascii) {
+    out.put("  <AppendedData encoding=\"raw\">\n   _");
+    for (const std::string& e : encoded) out.put(e);
+    out.put("\n  </AppendedData>\n");
   }
-  out.put("        </DataArray>\n"
-          "        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-  // 10 = VTK_TETRA; its point order (0,1,2 counter-clockwise seen from 3) is
-  // the positive orientation the mesh uses.
-  for (std::size_t i = 0; i < mesh.tets.size(); i += 32) {
-    s = "         ";
-    for (std::size_t j = i; j < std::min(mesh.tets.size(), i + 32); ++j) s += " 10";
-    s += '\n';
-    out.put(s);
-  }
-  out.put("        </DataArray>\n"
-          "      </Cells>\n"
-          "    </Piece>\n"
-          "  </UnstructuredGrid>\n"
-          "</VTKFile>\n");
+  out.put("</VTKFile>\n");
   out.commit();
+}
+
+void write_tetgen(const std::string& path, const Triangulation& t) {
+  // Straight from the triangulation, a line at a time: no copy of the mesh.
+  const std::string base = tetgen_base(path);
+  detail::OutputFile node(base + ".node");
+  detail::OutputFile ele(base + ".ele");
+  std::vector<std::uint32_t> node_of(t.vertex_id_bound(), 0xFFFFFFFFu);
+  std::string line;
+  detail::append_uint(line, t.number_of_vertices());
+  line += " 3 0 0\n";
+  node.put(line);
+  std::uint32_t next = 0;
+  for (VertexId v = 1; v < t.vertex_id_bound(); ++v) {
+    if (!t.is_vertex(v)) continue;
+    node_of[v] = next;
+    const Point3 p = t.point(v);
+    line.clear();
+    detail::append_uint(line, next++);
+    for (double c : {p.x, p.y, p.z}) {
+      line += ' ';
+      detail::append_double(line, c);
+    }
+    line += '\n';
+    node.put(line);
+  }
+  line.clear();
+  detail::append_uint(line, t.number_of_finite_cells());
+  line += " 4 0\n";
+  ele.put(line);
+  std::uint64_t k = 0;
+  for (CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_finite_cell(c)) continue;
+    line.clear();
+    detail::append_uint(line, k++);
+    for (int i = 0; i < 4; ++i) {
+      line += ' ';
+      detail::append_uint(line, node_of[t.cell_vertex(c, i)]);
+    }
+    line += '\n';
+    ele.put(line);
+  }
+  node.finish();
+  ele.finish();
+  node.commit();
+  ele.commit();
 }
 
 Mesh read_tetgen(const std::string& path) {

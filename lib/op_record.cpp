@@ -50,6 +50,7 @@ void OpRecordPool::release(OpRecord* op) {
   op->awaiter = nullptr;
   op->from_batch = false;
   op->routed = true;
+  op->only_if_alive = false;
   op->rollbacks = 0;
   op->stamp = 0;
   Shard& s = shards_[my_shard()];

@@ -23,6 +23,7 @@ struct OpRecord {
   OpKind kind = OpKind::insert;
   bool from_batch = false;      // insert: part of a spatially sorted batch (walk from the last vertex)
   bool routed = true;           // false: `point` unknown yet; the worker that pops it reads it and re-routes
+  bool only_if_alive = false;   // insert: only if `cell` is alive (no ticket then)
   std::uint32_t rollbacks = 0;  // times this operation met a lock (escalates at escalate_after)
   Point3 point;                 // insert: the point; others: where it runs (routing)
   VertexId vertex = no_vertex;  // remove

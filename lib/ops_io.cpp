@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "io_util.hpp"
@@ -41,92 +42,19 @@ constexpr const char* kExpectedForms = "expected 'i x y z', 'r k' or 'box x0 y0 
 using detail::box_problem;
 using detail::is_finite;
 
-// Tracks which insertions are live, to validate 'r k'.
+// Tracks which insertions are live, to validate 'r k': a set of the live
+// indices, so its size follows the live insertions, not the stream's length.
 struct LiveSet {
-  std::vector<std::uint8_t> live;  // live[k]: insertion k made and not undone
+  std::unordered_set<std::uint64_t> live;
+  std::uint64_t made = 0;  // insertions so far
+  void insert() { live.insert(made++); }
   // nullptr if 'r k' is fine here (and records it), else why not.
   const char* remove(std::uint64_t k) {
-    if (k >= live.size()) return "names an insertion that has not been made yet";
-    if (!live[k]) return "names an insertion that was already undone";
-    live[k] = 0;
+    if (k >= made) return "names an insertion that has not been made yet";
+    if (live.erase(k) == 0) return "names an insertion that was already undone";
     return nullptr;
   }
 };
-
-// ---- text -----------------------------------------------------------------
-
-void parse_coords(InputFile& f, const std::string_view* fields, std::size_t count, double* out, const char* what) {
-  for (std::size_t i = 0; i < count; ++i) {
-    NumStatus s = detail::parse_double(fields[i], out[i]);
-    if (s != NumStatus::ok)
-      f.fail(std::string(what) + " field " + std::to_string(i + 1) + " " + detail::quote(fields[i]) + " " +
-             detail::describe(s) + "; expected a finite decimal number");
-  }
-}
-
-OpStream read_text(InputFile& f) {
-  OpStream st;
-  LiveSet live;
-  std::uint64_t box_line = 0;
-  std::string_view line;
-  std::string_view fields[8];
-  while (f.read_line(line)) {
-    std::size_t n = detail::split_fields(detail::strip_comment(line), fields, 8);
-    if (n == 0) continue;  // blank or comment
-    std::string_view verb = fields[0];
-    if (verb == "i") {
-      if (n != 4)
-        f.fail("'i' with " + std::to_string(n - 1) + " field" + (n == 2 ? "" : "s") +
-               "; expected 'i x y z' (3 coordinates)");
-      double c[3];
-      parse_coords(f, fields + 1, 3, c, "insertion");
-      Operation op;
-      op.kind = Operation::Kind::insert;
-      op.point = {c[0], c[1], c[2]};
-      if (st.box && !st.box->contains(op.point))
-        f.fail("point " + detail::format_point(op.point) + " is outside the box declared on line " + std::to_string(box_line) +
-               "; expected every inserted point inside the box");
-      st.ops.push_back(op);
-      live.live.push_back(1);
-    } else if (verb == "r") {
-      if (n != 2)
-        f.fail("'r' with " + std::to_string(n - 1) + " fields; expected 'r k' (one insertion index)");
-      std::uint64_t k = 0;
-      NumStatus s = detail::parse_u64(fields[1], k);
-      if (s != NumStatus::ok)
-        f.fail("'r' index " + detail::quote(fields[1]) + " " +
-               (s == NumStatus::out_of_range ? "is too large" : "is not a non-negative integer") +
-               "; expected 'r k' with k the number (from 0) of an earlier 'i' line");
-      std::size_t made = live.live.size();
-      if (const char* why = live.remove(k))
-        f.fail("'r " + std::to_string(k) + "' " + why + " (" + std::to_string(made) +
-               " insertions so far); expected the index of an earlier, not yet undone 'i' line");
-      Operation op;
-      op.kind = Operation::Kind::remove;
-      op.target = k;
-      st.ops.push_back(op);
-    } else if (verb == "box") {
-      if (box_line != 0)
-        f.fail("second 'box' line (the first is line " + std::to_string(box_line) +
-               "); expected at most one box");
-      if (!st.ops.empty())
-        f.fail("'box' after operations; expected the box before any 'i' or 'r' line");
-      if (n != 7)
-        f.fail("'box' with " + std::to_string(n - 1) + " fields; expected 'box x0 y0 z0 x1 y1 z1' (6 numbers)");
-      double c[6];
-      parse_coords(f, fields + 1, 6, c, "box");
-      Box b{{c[0], c[1], c[2]}, {c[3], c[4], c[5]}};
-      if (const char* why = box_problem(b)) f.fail(std::string("the box ") + why + "; expected x0 <= x1, y0 <= y1, z0 <= z1");
-      st.box = b;
-      box_line = f.line();
-    } else {
-      f.fail("unknown verb " + detail::quote(verb) + "; " + kExpectedForms);
-    }
-  }
-  return st;
-}
-
-// ---- binary ---------------------------------------------------------------
 
 std::uint64_t load_u64(const unsigned char* p) {
   std::uint64_t v = 0;
@@ -143,60 +71,190 @@ void store_f64(unsigned char* p, double d) { store_u64(p, std::bit_cast<std::uin
   throw Error(ErrorCode::bad_format, f.path() + ": " + where + ": " + what);
 }
 
-OpStream read_binary(InputFile& f) {
-  OpStream st;
-  unsigned char head[8 + 1 + 48 + 8];
-  if (f.read_bytes(head, sizeof head) != sizeof head)
-    fail_bin(f, "header", "file ends inside the header; expected magic, box flag, box and count (65 bytes)");
-  const unsigned char has_box = head[8];
-  if (has_box > 1) fail_bin(f, "header", "box flag is " + std::to_string(has_box) + "; expected 0 or 1");
-  if (has_box) {
-    Box b{{load_f64(head + 9), load_f64(head + 17), load_f64(head + 25)},
-          {load_f64(head + 33), load_f64(head + 41), load_f64(head + 49)}};
-    if (const char* why = box_problem(b)) fail_bin(f, "header", std::string("the box ") + why);
-    st.box = b;
+void parse_coords(InputFile& f, const std::string_view* fields, std::size_t count, double* out, const char* what) {
+  for (std::size_t i = 0; i < count; ++i) {
+    NumStatus s = detail::parse_double(fields[i], out[i]);
+    if (s != NumStatus::ok)
+      f.fail(std::string(what) + " field " + std::to_string(i + 1) + " " + detail::quote(fields[i]) + " " +
+             detail::describe(s) + "; expected a finite decimal number");
   }
-  const std::uint64_t count = load_u64(head + 57);
-  // Reserve by what the file could hold at most (9 bytes per operation is the
-  // smallest record), never by the count alone: a corrupt count must not
-  // trigger a huge allocation. The file may be gzipped, so this is only a cap.
-  st.ops.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(count, 1u << 24)));
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// OpReader: one operation at a time, checked as it is read
+// ---------------------------------------------------------------------------
+struct OpReader::State {
+  explicit State(const std::string& path) : f(path) {}
+  InputFile f;
+  bool binary = false;
+  std::optional<Box> box;
+  std::optional<std::uint64_t> count;  // binary: announced
+  std::uint64_t read = 0;              // operations returned
+  std::uint64_t box_line = 0;          // text: where the box was
+  std::optional<Operation> pending;    // text: the first operation, read while looking for a box
+  bool done = false;
   LiveSet live;
-  unsigned char rec[24];
-  for (std::uint64_t i = 0; i < count; ++i) {
+
+  // Text: the next operation, or false at the end of the file.
+  bool next_text(Operation& op) {
+    std::string_view line;
+    std::string_view fields[8];
+    while (f.read_line(line)) {
+      std::size_t n = detail::split_fields(detail::strip_comment(line), fields, 8);
+      if (n == 0) continue;  // blank or comment
+      std::string_view verb = fields[0];
+      if (verb == "i") {
+        if (n != 4)
+          f.fail("'i' with " + std::to_string(n - 1) + " field" + (n == 2 ? "" : "s") +
+                 "; expected 'i x y z' (3 coordinates)");
+        double c[3];
+        parse_coords(f, fields + 1, 3, c, "insertion");
+        op = Operation{};
+        op.kind = Operation::Kind::insert;
+        op.point = {c[0], c[1], c[2]};
+        if (box && !box->contains(op.point))
+          f.fail("point " + detail::format_point(op.point) + " is outside the box declared on line " +
+                 std::to_string(box_line) + "; expected every inserted point inside the box");
+        live.insert();
+        return true;
+      }
+      if (verb == "r") {
+        if (n != 2) f.fail("'r' with " + std::to_string(n - 1) + " fields; expected 'r k' (one insertion index)");
+        std::uint64_t k = 0;
+        NumStatus s = detail::parse_u64(fields[1], k);
+        if (s != NumStatus::ok)
+          f.fail("'r' index " + detail::quote(fields[1]) + " " +
+                 (s == NumStatus::out_of_range ? "is too large" : "is not a non-negative integer") +
+                 "; expected 'r k' with k the number (from 0) of an earlier 'i' line");
+        const std::uint64_t made = live.made;
+        if (const char* why = live.remove(k))
+          f.fail("'r " + std::to_string(k) + "' " + why + " (" + std::to_string(made) +
+                 " insertions so far); expected the index of an earlier, not yet undone 'i' line");
+        op = Operation{};
+        op.kind = Operation::Kind::remove;
+        op.target = k;
+        return true;
+      }
+      if (verb == "box") {
+        if (box_line != 0)
+          f.fail("second 'box' line (the first is line " + std::to_string(box_line) + "); expected at most one box");
+        if (read != 0 || pending)
+          f.fail("'box' after operations; expected the box before any 'i' or 'r' line");
+        if (n != 7)
+          f.fail("'box' with " + std::to_string(n - 1) + " fields; expected 'box x0 y0 z0 x1 y1 z1' (6 numbers)");
+        double c[6];
+        parse_coords(f, fields + 1, 6, c, "box");
+        Box b{{c[0], c[1], c[2]}, {c[3], c[4], c[5]}};
+        if (const char* why = box_problem(b))
+          f.fail(std::string("the box ") + why + "; expected x0 <= x1, y0 <= y1, z0 <= z1");
+        box = b;
+        box_line = f.line();
+        continue;
+      }
+      f.fail("unknown verb " + detail::quote(verb) + "; " + kExpectedForms);
+    }
+    return false;
+  }
+
+  void read_binary_header() {
+    unsigned char head[8 + 1 + 48 + 8];
+    if (f.read_bytes(head, sizeof head) != sizeof head)
+      fail_bin(f, "header", "file ends inside the header; expected magic, box flag, box and count (65 bytes)");
+    const unsigned char has_box = head[8];
+    if (has_box > 1) fail_bin(f, "header", "box flag is " + std::to_string(has_box) + "; expected 0 or 1");
+    if (has_box) {
+      Box b{{load_f64(head + 9), load_f64(head + 17), load_f64(head + 25)},
+            {load_f64(head + 33), load_f64(head + 41), load_f64(head + 49)}};
+      if (const char* why = box_problem(b)) fail_bin(f, "header", std::string("the box ") + why);
+      box = b;
+    }
+    count = load_u64(head + 57);
+  }
+
+  bool next_binary(Operation& op) {
+    const std::uint64_t i = read;
+    if (i == *count) {
+      if (!f.peek(1).empty())
+        fail_bin(f, "byte " + std::to_string(f.offset()),
+                 "extra data after the " + std::to_string(*count) + " operations the header announces");
+      return false;
+    }
     const std::uint64_t at = f.offset();  // where this operation's record starts
     auto where = [&] { return "operation " + std::to_string(i) + " (byte " + std::to_string(at) + ")"; };
     unsigned char kind = 0;
+    unsigned char rec[24];
     if (f.read_bytes(&kind, 1) != 1)
-      fail_bin(f, where(), "file ends after " + std::to_string(i) + " of the " + std::to_string(count) +
+      fail_bin(f, where(), "file ends after " + std::to_string(i) + " of the " + std::to_string(*count) +
                                " operations the header announces");
-    Operation op;
+    op = Operation{};
     if (kind == 0) {
       if (f.read_bytes(rec, 24) != 24) fail_bin(f, where(), "file ends inside an insertion record (kind + 3 x f64)");
       op.kind = Operation::Kind::insert;
       op.point = {load_f64(rec), load_f64(rec + 8), load_f64(rec + 16)};
       if (!is_finite(op.point)) fail_bin(f, where(), "insertion of a point with a NaN or infinite coordinate");
-      if (st.box && !st.box->contains(op.point))
+      if (box && !box->contains(op.point))
         fail_bin(f, where(), "point " + detail::format_point(op.point) + " is outside the stream's box");
-      live.live.push_back(1);
+      live.insert();
     } else if (kind == 1) {
       if (f.read_bytes(rec, 8) != 8) fail_bin(f, where(), "file ends inside a removal record (kind + u64)");
       op.kind = Operation::Kind::remove;
       op.target = load_u64(rec);
-      std::size_t made = live.live.size();
+      const std::uint64_t made = live.made;
       if (const char* why = live.remove(op.target))
         fail_bin(f, where(), "removal of insertion " + std::to_string(op.target) + " " + why + " (" +
                                  std::to_string(made) + " insertions so far)");
     } else {
       fail_bin(f, where(), "unknown operation kind " + std::to_string(kind) + "; expected 0 (insert) or 1 (remove)");
     }
-    st.ops.push_back(op);
+    return true;
   }
-  if (!f.peek(1).empty())
-    fail_bin(f, "byte " + std::to_string(f.offset()), "extra data after the " + std::to_string(count) +
-                                                         " operations the header announces");
-  return st;
+};
+
+OpReader::OpReader(const std::string& path) : state_(std::make_unique<State>(path)) {
+  State& st = *state_;
+  std::string_view head = st.f.peek(sizeof kMagic);
+  st.binary = head.size() == sizeof kMagic && std::memcmp(head.data(), kMagic, sizeof kMagic) == 0;
+  if (st.binary) {
+    st.read_binary_header();
+  } else {
+    // The box, if any, comes before the first operation: read up to it.
+    Operation first;
+    if (st.next_text(first)) st.pending = first;
+  }
 }
+
+OpReader::~OpReader() = default;
+OpReader::OpReader(OpReader&&) noexcept = default;
+OpReader& OpReader::operator=(OpReader&&) noexcept = default;
+
+const std::optional<Box>& OpReader::box() const { return state_->box; }
+std::optional<std::uint64_t> OpReader::announced_count() const { return state_->count; }
+std::uint64_t OpReader::operations_read() const { return state_->read; }
+std::uint64_t OpReader::bytes_read() const { return state_->f.offset(); }
+const std::string& OpReader::path() const { return state_->f.path(); }
+
+bool OpReader::next(Operation& op) {
+  State& st = *state_;
+  if (st.done) return false;
+  bool got = false;
+  if (st.pending) {
+    op = *st.pending;
+    st.pending.reset();
+    got = true;
+  } else {
+    got = st.binary ? st.next_binary(op) : st.next_text(op);
+  }
+  if (!got) {
+    st.done = true;
+    return false;
+  }
+  ++st.read;
+  return true;
+}
+
+namespace {
 
 void validate_for_write(const OpStream& s) {
   auto bad = [](const std::string& what) { throw Error(ErrorCode::invalid_argument, "write_ops: " + what); };
@@ -209,7 +267,7 @@ void validate_for_write(const OpStream& s) {
       if (!is_finite(op.point)) bad("operation " + std::to_string(i) + " inserts a point with a NaN or infinite coordinate");
       if (s.box && !s.box->contains(op.point))
         bad("operation " + std::to_string(i) + " inserts " + detail::format_point(op.point) + ", outside the box");
-      live.live.push_back(1);
+      live.insert();
     } else if (op.kind == Operation::Kind::remove) {
       if (const char* why = live.remove(op.target))
         bad("operation " + std::to_string(i) + " (remove " + std::to_string(op.target) + ") " + why);
@@ -222,11 +280,15 @@ void validate_for_write(const OpStream& s) {
 }  // namespace
 
 OpStream read_ops(const std::string& path) {
-  InputFile f(path);
-  std::string_view head = f.peek(sizeof kMagic);
-  if (head.size() == sizeof kMagic && std::memcmp(head.data(), kMagic, sizeof kMagic) == 0)
-    return read_binary(f);  // reads the header from the magic on
-  return read_text(f);
+  OpReader reader(path);
+  OpStream st;
+  st.box = reader.box();
+  // Reserve by what the file could hold at most, never by an announced count
+  // alone: a corrupt count must not trigger a huge allocation.
+  if (reader.announced_count()) st.ops.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(*reader.announced_count(), 1u << 24)));
+  Operation op;
+  while (reader.next(op)) st.ops.push_back(op);
+  return st;
 }
 
 void write_ops(const std::string& path, const OpStream& stream) {

@@ -64,6 +64,15 @@ InsertResult Triangulation::insert(const Point3& p, Hint hint) {
   return out.result;
 }
 
+InsertResult Triangulation::insert_if_alive(const Point3& p, CellHandle h) {
+  require_detached(*impl_, "insert_if_alive");
+  require_finite(p);
+  Impl& m = *impl_;
+  Impl::Inserted out;
+  m.insert(*m.seq, to_kpoint(p), no_vertex, out, &h);  // single-threaded: always done
+  return out.result;
+}
+
 std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> points) {
   require_detached(*impl_, "insert_batch");
   for (const Point3& p : points) require_finite(p);

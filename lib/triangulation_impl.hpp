@@ -219,6 +219,9 @@ struct Triangulation::Impl {
   OpStatus nearest_vertex(OpContext& ctx, const KPoint& p, VertexId& out) const;
   // The cell of h if live (*view filled) or dead (*alive = false). Holding
   // h.anchor shared pins every cell around it, so nothing else is locked.
+  // Takes h.anchor shared and says whether h's cell is alive; on done the
+  // anchor stays held (the caller releases), on rollback nothing is held.
+  OpStatus hold_cell(OpContext& ctx, CellHandle h, bool* alive) const;
   // while_held, if given, runs on the cell (if alive) before the anchor is released.
   OpStatus find_cell(OpContext& ctx, CellHandle h, bool* alive, CellView* view,
                      const std::function<void(const CellView&)>* while_held = nullptr) const;
@@ -229,7 +232,11 @@ struct Triangulation::Impl {
     InsertResult result;
     std::uint64_t stamp = 0;  // the incarnation of result.vertex
   };
-  OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out);
+  // only_if_alive: insert p only if that cell is still live (else do nothing
+  // and report {no_vertex, false}); the check and the insertion are one
+  // operation, since the cell's anchor stays held in between.
+  OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
+                  const CellHandle* only_if_alive = nullptr);
   // Marks are cleared before it returns, whatever it returns.
   OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0);
   void cone_from_vertex(OpContext& ctx, VertexId v);

@@ -1,9 +1,14 @@
 #!/usr/bin/env bash
 # Installs pdt's build dependencies from Debian 12 packages. Idempotent: packages
 # already present are left alone, so it is cheap to run before every build.
+#   install-deps.sh            what building and testing need (python3-vtk9: the test
+#                              that reads pdt's .vtu files with VTK's own reader)
+#   install-deps.sh --extras   also what the plot and picture scripts need
+#                              (matplotlib, Xvfb for VTK's offscreen rendering)
 set -euo pipefail
 packages=(build-essential cmake ninja-build pkg-config libtbb-dev libcgal-dev libgmp-dev libmpfr-dev
-          libboost-dev libmimalloc-dev catch2 zlib1g-dev)
+          libboost-dev libmimalloc-dev catch2 zlib1g-dev python3-vtk9)
+if [ "${1:-}" = "--extras" ]; then packages+=(python3-matplotlib xvfb xauth); fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

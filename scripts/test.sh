@@ -11,5 +11,5 @@ cmake --preset release
 cmake --build --preset release
 ctest --preset release
 cmake --preset mimalloc
-cmake --build --preset mimalloc --target pdt_tests pdt_fault_tests pdt_tool quickstart
+cmake --build --preset mimalloc --target pdt_tests pdt_fault_tests pdt_fuzz pdt_tool quickstart
 ctest --preset mimalloc -LE package-shared  # the shared-library package test runs once, in the release build

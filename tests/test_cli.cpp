@@ -8,44 +8,16 @@
 #include <string>
 
 #include "common/io_test_util.hpp"
+#include "common/tool_run.hpp"
 #include "pdt/ops.hpp"
 
+using pdt_test::have_tool;
+using pdt_test::Result;
+using pdt_test::run_pdt;
 using pdt_test::TempDir;
 using pdt_test::write_file;
 
 namespace {
-
-struct Result {
-  int code = -1;  // exit status, or -1 if the tool did not exit normally (crash)
-  std::string out, err;
-};
-
-bool have_tool() {
-#ifdef PDT_TOOL_PATH
-  if (std::filesystem::exists(PDT_TOOL_PATH)) return true;
-  WARN("pdt tool not found at " << PDT_TOOL_PATH << "; skipping");
-#else
-  WARN("PDT_TOOL_PATH not defined; skipping");
-#endif
-  return false;
-}
-
-// Runs `pdt <args>` with stdout and stderr captured in files of d.
-Result run_pdt(const TempDir& d, const std::string& args) {
-  Result r;
-#ifdef PDT_TOOL_PATH
-  const std::string out = d.file("stdout.txt"), err = d.file("stderr.txt");
-  const std::string cmd = std::string("'") + PDT_TOOL_PATH + "' " + args + " >'" + out + "' 2>'" + err + "' </dev/null";
-  const int status = std::system(cmd.c_str());
-  r.code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
-  r.out = pdt_test::read_file(out);
-  r.err = pdt_test::read_file(err);
-#else
-  (void)d;
-  (void)args;
-#endif
-  return r;
-}
 
 // A bad input: exit 2 and one "pdt: <file>:<line>: ..." message on stderr.
 void expect_input_error(const std::string& content, int line, const std::string& what) {
@@ -166,7 +138,7 @@ TEST_CASE("pdt gen, run and check work end to end", "[cli]") {
   r = run_pdt(d, "run '" + ops + "' --threads 4 --validate --out '" + d.file("m.vtu") + "'");
   INFO("stdout:\n" << r.out << "\nstderr:\n" << r.err);
   CHECK(r.code == 0);
-  CHECK(r.out.find("4 (parallel engine") != std::string::npos);
+  CHECK(r.out.find("4 workers (parallel engine") != std::string::npos);
   CHECK(r.out.find("vertices         1,500\n") != std::string::npos);
   CHECK(r.out.find("workers          4,500 completed") != std::string::npos);
   CHECK(r.out.find("validate         ok") != std::string::npos);
@@ -192,4 +164,36 @@ TEST_CASE("pdt gen is deterministic", "[cli]") {
     REQUIRE(run_pdt(d, std::string("gen --dist ") + dist + " --points 2000 --seed 4 --out '" + b + "'").code == 0);
     CHECK(pdt_test::read_file(a) != pdt_test::read_file(b));
   }
+}
+
+TEST_CASE("pdt run triangulates a point file as a batch, or in file order, with bounded streaming", "[cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  std::string xyz;
+  for (long long i = 0; i < 2000; ++i)
+    xyz += std::to_string((i * 7919 % 1000) / 1000.0) + " " + std::to_string((i * 104729 % 997) / 997.0) + " " +
+           std::to_string((i * 1299709 % 991) / 991.0) + "\n";
+  write_file(d.file("cloud.xyz"), xyz);
+  for (const char* mode : {"", " --in-order", " --threads 3", " --threads 3 --in-order"}) {
+    INFO(mode);
+    const Result r = run_pdt(d, "run '" + d.file("cloud.xyz") + "'" + mode + " --validate");
+    INFO(r.out << r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find(std::string(mode).find("in-order") != std::string::npos ? "(points in file order)"
+                                                                             : "(points as a batch, spatial order)") !=
+          std::string::npos);
+    CHECK(r.out.find("insertions       2,000") != std::string::npos);
+    CHECK(r.out.find("bytes/vertex") != std::string::npos);
+    CHECK(r.out.find("validate         ok") != std::string::npos);
+  }
+  // A stream on the engine with a tiny window of operations in flight: same result.
+  Result r = run_pdt(d, "gen --points 5000 --remove-fraction 0.8 --interleaved --out '" + d.file("s.opsb") + "'");
+  REQUIRE(r.code == 0);
+  r = run_pdt(d, "run '" + d.file("s.opsb") + "' --threads 4 --in-flight 8 --validate");
+  INFO(r.out << r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.out.find("vertices         1,000\n") != std::string::npos);
+  CHECK(r.out.find("in flight        at most 8 operations") != std::string::npos);
+  CHECK(r.out.find("imbalance") != std::string::npos);
+  CHECK(r.out.find("validate         ok") != std::string::npos);
 }

@@ -413,6 +413,7 @@ TEST_CASE("contract: destroying the engine or draining from its own callback is 
   arena.execute([&] {
     auto* e = new pdt::Engine(t, kUnit, options_with(2));
     std::string drain_why, delete_why;
+    std::atomic<bool> finished{false};  // set last: the strings are written before
     e->insert({0.5, 0.5, 0.5}, [&](const pdt::OpResult&) {
       try {
         e->drain();
@@ -424,10 +425,12 @@ TEST_CASE("contract: destroying the engine or draining from its own callback is 
       } catch (const pdt::Error& err) {
         delete_why = err.what();
       }
+      finished.store(true);
     });
     // The engine object is gone (delete freed it after its destructor threw),
     // its state lives on: wait for the callback through the triangulation.
-    for (int k = 0; k < 2000 && delete_why.empty(); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    for (int k = 0; k < 20000 && !finished.load(); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    REQUIRE(finished.load());
     REQUIRE(drain_why.find("would wait for itself") != std::string::npos);
     REQUIRE(delete_why.find("destroyed from one of its own callbacks") != std::string::npos);
   });

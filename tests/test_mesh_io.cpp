@@ -12,7 +12,10 @@
 #include <tuple>
 #include <vector>
 
+#include <zlib.h>
+
 #include "common/io_test_util.hpp"
+#include "common/point_sets.hpp"
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
@@ -375,7 +378,7 @@ TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {
   m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}};
   m.tets = {{0, 1, 2, 3}, {1, 2, 3, 4}};
   const std::string p = d.file("m.vtu");
-  pdt::write_vtu(p, m);
+  pdt::write_vtu(p, m, pdt::VtuEncoding::ascii);
   const std::string x = pdt_test::read_file(p);
   CHECK(x.rfind("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\"", 0) == 0);
   CHECK(x.find("<Piece NumberOfPoints=\"5\" NumberOfCells=\"2\">") != std::string::npos);
@@ -385,6 +388,97 @@ TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {
   CHECK(x.size() > 5 * 3);
   CHECK(x.substr(x.size() - 11) == "</VTKFile>\n");
   CHECK(d.entries() == 1);
+}
+
+// Decodes one appended DataArray of a .vtu written by write_vtu (raw or zlib,
+// UInt64 headers), as VTK's reader does.
+std::string appended_array(const std::string& x, const std::string& name, bool zlib) {
+  const std::size_t tag = x.find(name);
+  REQUIRE(tag != std::string::npos);
+  const std::size_t at = x.find("offset=\"", tag);
+  const std::uint64_t offset = std::stoull(x.substr(at + 8));
+  const std::size_t data = x.find("<AppendedData encoding=\"raw\">");
+  REQUIRE(data != std::string::npos);
+  const std::size_t base = x.find('_', data) + 1 + offset;
+  auto u64 = [&](std::size_t pos) {
+    std::uint64_t v = 0;
+    for (int b = 7; b >= 0; --b) v = (v << 8) | static_cast<unsigned char>(x[pos + b]);
+    return v;
+  };
+  if (!zlib) return x.substr(base + 8, u64(base));
+  const std::uint64_t blocks = u64(base), block = u64(base + 8), last = u64(base + 16);
+  std::string out;
+  std::size_t pos = base + 24 + 8 * blocks;
+  for (std::uint64_t b = 0; b < blocks; ++b) {
+    const std::uint64_t packed = u64(base + 24 + 8 * b);
+    std::string plain(b + 1 == blocks ? last : block, '\0');
+    uLongf len = static_cast<uLongf>(plain.size());
+    REQUIRE(uncompress(reinterpret_cast<Bytef*>(plain.data()), &len,
+                       reinterpret_cast<const Bytef*>(x.data() + pos), static_cast<uLong>(packed)) == Z_OK);
+    REQUIRE(len == plain.size());
+    out += plain;
+    pos += packed;
+  }
+  return out;
+}
+
+TEST_CASE("write_vtu's binary forms hold the mesh and its cell fields, raw and zlib-compressed", "[io]") {
+  TempDir d;
+  pdt::Mesh m;
+  m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}, {0.1, 0.2, 0.30000000000000004}};
+  m.tets = {{0, 1, 2, 3}, {1, 2, 3, 4}, {5, 1, 2, 3}};
+  const std::vector<pdt::CellField> fields{{"quality", {0.5, 0.25, 1e-300}}, {"label", {1, 2, 3}}};
+  for (bool zlib : {false, true}) {
+    INFO((zlib ? "zlib" : "raw"));
+    const std::string p = d.file(zlib ? "z.vtu" : "r.vtu");
+    pdt::write_vtu(p, m, zlib ? pdt::VtuEncoding::zlib : pdt::VtuEncoding::raw, fields);
+    const std::string x = pdt_test::read_file(p);
+    CHECK((x.find("compressor=\"vtkZLibDataCompressor\"") != std::string::npos) == zlib);
+    CHECK(x.find("header_type=\"UInt64\"") != std::string::npos);
+    const std::string xyz = appended_array(x, "NumberOfComponents=\"3\"", zlib);
+    REQUIRE(xyz.size() == 3 * 8 * m.points.size());
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      double c[3];
+      std::memcpy(c, xyz.data() + 24 * i, 24);
+      CHECK(pdt_test::same_bits(pdt::Point3{c[0], c[1], c[2]}, m.points[i]));
+    }
+    const std::string conn = appended_array(x, "Name=\"connectivity\"", zlib);
+    REQUIRE(conn.size() == 4 * 8 * m.tets.size());
+    for (std::size_t t = 0; t < m.tets.size(); ++t)
+      for (int k = 0; k < 4; ++k) {
+        std::int64_t v = 0;
+        std::memcpy(&v, conn.data() + 8 * (4 * t + k), 8);
+        CHECK(v == m.tets[t][k]);
+      }
+    const std::string types = appended_array(x, "Name=\"types\"", zlib);
+    CHECK(types == std::string(m.tets.size(), '\x0a'));
+    const std::string q = appended_array(x, "Name=\"quality\"", zlib);
+    REQUIRE(q.size() == 3 * 8);
+    double v[3];
+    std::memcpy(v, q.data(), 24);
+    CHECK(v[0] == 0.5);
+    CHECK(v[2] == 1e-300);
+  }
+  // A field of the wrong length is refused, and nothing is written.
+  const auto e = pdt_test::catch_error([&] {
+    pdt::write_vtu(d.file("bad.vtu"), m, pdt::VtuEncoding::zlib, std::vector<pdt::CellField>{{"q", {1.0}}});
+  });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  CHECK_FALSE(std::filesystem::exists(d.file("bad.vtu")));
+}
+
+TEST_CASE("write_tetgen from a triangulation writes what extract_mesh gives", "[io]") {
+  TempDir d;
+  pdt::Triangulation t;
+  for (const pdt::Point3& p : pdt_test::generated_points(pdt::Distribution::uniform, 500, 3)) t.insert(p);
+  pdt::write_tetgen(d.file("a.node"), t);
+  pdt::write_tetgen(d.file("b.node"), pdt::extract_mesh(t));
+  CHECK(pdt_test::read_file(d.file("a.node")) == pdt_test::read_file(d.file("b.node")));
+  CHECK(pdt_test::read_file(d.file("a.ele")).size() > 0);
+  const pdt::Mesh back = pdt::read_tetgen(d.file("a.node"));
+  CHECK(back.tets.size() == t.number_of_finite_cells());
+  CHECK(pdt::check_mesh(back).valid);
 }
 
 // ---- check_mesh ----------------------------------------------------------------------

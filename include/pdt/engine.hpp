@@ -117,8 +117,9 @@ struct Request {
   OpKind kind = OpKind::insert;
   Point3 point;
   VertexHandle vertex;  // remove: incarnation 0 = whichever is live now
-  CellHandle cell;      // visit
+  CellHandle cell;      // visit; insert: only if this cell is alive (when only_if_alive)
   CellVisitor visitor;  // visit
+  bool only_if_alive = false;
 };
 struct OpAwaitBase {
   Engine* engine = nullptr;
@@ -174,6 +175,11 @@ class Engine {
   // -- awaitable forms: errors (NaN, outside the domain, a dead vertex) are
   //    thrown by co_await ---------------------------------------------------------
   InsertAwaitable insert(const Point3& p);
+  // Inserts p only if cell h is still alive when the insertion runs (a
+  // refiner inserting a bad cell's circumcentre: if the cell died meanwhile,
+  // nothing is inserted and co_await gives {no_vertex, false}). The check and
+  // the insertion are one operation. Such an insertion has no ticket.
+  InsertAwaitable insert_if_alive(const Point3& p, CellHandle h);
   RemoveAwaitable remove(VertexId v);
   RemoveAwaitable remove(VertexHandle v);  // that incarnation only
   LocateAwaitable locate(const Point3& p);
@@ -185,6 +191,7 @@ class Engine {
   // -- callback forms (callback may be empty): bad input throws pdt::Error at
   //    once and submits nothing ------------------------------------------------------
   Ticket insert(const Point3& p, Callback done);
+  void insert_if_alive(const Point3& p, CellHandle h, Callback done);
   void remove(VertexId v, Callback done);
   void remove(VertexHandle v, Callback done);
   void locate(const Point3& p, Callback done);

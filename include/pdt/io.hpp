@@ -1,6 +1,7 @@
 #pragma once
 // Reading point sets and writing / reading meshes.
 #include <array>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -25,11 +26,28 @@ struct Mesh {
 // The finite part of a triangulation, vertices renumbered 0..n-1 in id order.
 Mesh extract_mesh(const Triangulation& t);
 
+// How write_vtu stores its arrays: VTK's XML UnstructuredGrid, as ParaView
+// writes it, with the data appended after the XML in binary, zlib-compressed
+// (the default) or raw, or inline as ASCII text.
+enum class VtuEncoding { zlib, raw, ascii };
+
+// A value per tetrahedron, written as VTK cell data (a quality, a label).
+struct CellField {
+  std::string name;
+  std::vector<double> values;
+};
+
 // TetGen: path.node + path.ele (path given with or without extension),
-// 0-based numbering. VTK: .vtu UnstructuredGrid (ASCII) ParaView opens.
-// Writes go through a temporary file and a rename; failure throws io_failure.
+// 0-based numbering. VTK: .vtu UnstructuredGrid ParaView opens, with
+// optional cell fields (invalid_argument if one's size differs from the
+// tetrahedra's). Writes go through a temporary file and a rename; failure
+// throws io_failure.
 void write_tetgen(const std::string& path, const Mesh& mesh);
-void write_vtu(const std::string& path, const Mesh& mesh);
+// The same straight from a triangulation, a line at a time, without copying
+// the mesh first (for large meshes). Nodes numbered in vertex-id order.
+void write_tetgen(const std::string& path, const Triangulation& t);
+void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding = VtuEncoding::zlib,
+               std::span<const CellField> cell_fields = {});
 Mesh read_tetgen(const std::string& path);  // reads .node and the .ele beside it
 
 struct MeshCheck {

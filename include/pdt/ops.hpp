@@ -13,6 +13,7 @@
 // u64 count, then per operation: u8 kind (0 insert, 1 remove) followed by 3 x f64
 // (insert) or u64 k (remove).
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,32 @@ struct OpStream {
   std::vector<Operation> ops;
   std::size_t insert_count() const;
   std::size_t remove_count() const;
+};
+
+// Reads a stream one operation at a time, with the checks read_ops makes, so
+// that a long stream can be replayed without holding it in memory (what it
+// keeps grows with the live insertions, not with the stream). The format is
+// chosen by content; throws as read_ops does, from the constructor (a bad
+// header or box) or from next().
+class OpReader {
+ public:
+  explicit OpReader(const std::string& path);
+  ~OpReader();
+  OpReader(OpReader&&) noexcept;
+  OpReader& operator=(OpReader&&) noexcept;
+  // The stream's box, if it declares one (known once constructed).
+  const std::optional<Box>& box() const;
+  // The number of operations the binary form announces; nothing for text.
+  std::optional<std::uint64_t> announced_count() const;
+  // The next operation, or false at the end of the stream.
+  bool next(Operation& op);
+  std::uint64_t operations_read() const;
+  std::uint64_t bytes_read() const;  // uncompressed bytes consumed so far
+  const std::string& path() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
 };
 
 // Reads a stream; the format is chosen by content (binary magic) not by name

@@ -114,6 +114,9 @@ class Triangulation {
   // -- mutation (one thread; refused while an engine is attached) -------------
   // Inserts p. Throws pdt::Error(non_finite_coordinate) for NaN/Inf and changes nothing.
   InsertResult insert(const Point3& p, Hint hint = {});
+  // Inserts p only if cell h is still alive; otherwise inserts nothing and
+  // returns {no_vertex, false}.
+  InsertResult insert_if_alive(const Point3& p, CellHandle h);
   // Inserts a batch in an order of its own (CGAL's spatial sort, as CGAL's
   // range insertion does): consecutive points are close, so it is about twice
   // as fast as inserting the same points one by one in a random order. The

@@ -1,0 +1,164 @@
+// `pdt refine`, judged from the outside: it is run as a process, and its
+// output is checked independently. The mesh (.node/.ele) must be the Delaunay
+// triangulation of its points (CGAL's); every tetrahedron whose circumcentre
+// is inside the domain, out of the protected layer along the surface, must
+// meet both bounds (circumcentres computed here, with CGAL's kernel); the
+// trace must replay, sequentially and on the engine, to the same
+// triangulation; and this with 1, 2 and 8 workers. Bad arguments are refused.
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "common/cgal_reference.hpp"
+#include "common/io_test_util.hpp"
+#include "common/tool_run.hpp"
+#include "pdt/io.hpp"
+#include "refine/domain.hpp"
+
+using namespace pdt_test;
+using pdt::Point3;
+
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+
+// The torus, written here again: inside where < 0 (the tool's is not used to judge).
+double torus(const Point3& p) {
+  const double r = std::sqrt(p.x * p.x + p.y * p.y) - 1;
+  return std::sqrt(r * r + p.z * p.z) - 0.4;
+}
+
+// Tetrahedra as sorted point triples-of-coordinates, to compare meshes whose
+// node numbers differ.
+std::vector<std::array<Point3, 4>> tets_of(const pdt::Mesh& m) {
+  std::vector<std::array<Point3, 4>> out;
+  auto less = [](const Point3& a, const Point3& b) { return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z); };
+  for (const auto& t : m.tets) {
+    std::array<Point3, 4> q{m.points[t[0]], m.points[t[1]], m.points[t[2]], m.points[t[3]]};
+    std::sort(q.begin(), q.end(), less);
+    out.push_back(q);
+  }
+  std::sort(out.begin(), out.end(), [&](const auto& a, const auto& b) {
+    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), less);
+  });
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds, and its trace replays",
+          "[refine][cli]") {
+  if (!have_tool()) return;
+  const double size = 0.12, ratio = 2;
+  // The surface samples the refiner protects the surface with (same size and seed).
+  const std::vector<Point3> samples = pdt_refine::surface_samples(pdt_refine::domain_by_name("torus"), size, 1);
+  REQUIRE(samples.size() > 100);
+  for (const char* workers : {"1", "2", "8"}) {
+    INFO(workers << " workers");
+    TempDir d;
+    const std::string mesh = d.file("torus.node"), trace = d.file("torus.ops");
+    Result r = run_pdt(d, std::string("refine --domain torus --size 0.12 --threads ") + workers + " --out '" + mesh +
+                              "' --trace '" + trace + "' --validate");
+    INFO("stdout:\n" << r.out << "\nstderr:\n" << r.err);
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find("validate         ok") != std::string::npos);
+    CHECK(r.out.find("bounds           met") != std::string::npos);
+    const pdt::Mesh m = pdt::read_tetgen(mesh);
+    REQUIRE(m.points.size() > 500);
+
+    // Delaunay: CGAL's triangulation of the same points.
+    {
+      const TetList want = cgal_tets(m.points);
+      TetList got;
+      for (const auto& t : m.tets) got.push_back({t[0], t[1], t[2], t[3]});
+      canonicalize(got);
+      REQUIRE(got.size() == want.size());
+      REQUIRE((got == want));
+    }
+    // The bounds, for every tetrahedron whose circumcentre is inside and not
+    // within a quarter of the size of a surface sample (the protected layer).
+    std::size_t judged = 0, bad = 0;
+    for (const auto& t : m.tets) {
+      const K::Point_3 p[4] = {to_cgal(m.points[t[0]]), to_cgal(m.points[t[1]]), to_cgal(m.points[t[2]]),
+                               to_cgal(m.points[t[3]])};
+      const K::Point_3 c = CGAL::circumcenter(p[0], p[1], p[2], p[3]);
+      const Point3 cc{c.x(), c.y(), c.z()};
+      if (!(torus(cc) < 0)) continue;
+      bool in_layer = false;
+      for (const Point3& s : samples)
+        if ((s.x - cc.x) * (s.x - cc.x) + (s.y - cc.y) * (s.y - cc.y) + (s.z - cc.z) * (s.z - cc.z) <
+            0.25 * size * 0.25 * size) {
+          in_layer = true;
+          break;
+        }
+      if (in_layer) continue;
+      ++judged;
+      const double radius = std::sqrt(CGAL::squared_distance(c, p[0]));
+      double shortest = HUGE_VAL;
+      for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) shortest = std::min(shortest, std::sqrt(CGAL::squared_distance(p[i], p[j])));
+      // 1e-9 of slack: the refiner judges with its own (double) circumcentre.
+      if (radius > size * (1 + 1e-9) || radius / shortest > ratio * (1 + 1e-9)) ++bad;
+    }
+    CHECK(judged > m.tets.size() / 2);
+    CHECK(bad == 0);
+    // The trace replays to the same triangulation, sequentially and on the engine.
+    for (const char* replay : {"", " --threads 3"}) {
+      INFO("replay" << replay);
+      const std::string again = d.file("again.node");
+      r = run_pdt(d, "run '" + trace + "'" + replay + " --out '" + again + "'");
+      REQUIRE(r.code == 0);
+      CHECK(r.out.find("removals         0\n") == std::string::npos);  // the stream does mix in removals
+      CHECK((tets_of(pdt::read_tetgen(again)) == tets_of(m)));
+    }
+  }
+}
+
+TEST_CASE("refine: every domain, a .vtu with the quality fields", "[refine][cli]") {
+  if (!have_tool()) return;
+  for (const char* domain : {"sphere", "gyroid"}) {
+    INFO(domain);
+    TempDir d;
+    const Result r = run_pdt(d, std::string("refine --domain ") + domain + " --size 0.15 --threads 2 --out '" +
+                                    d.file("m.vtu") + "'");
+    INFO("stdout:\n" << r.out << "\nstderr:\n" << r.err);
+    REQUIRE(r.code == 0);
+    const std::string vtu = read_file(d.file("m.vtu"));
+    for (const char* field : {"radius_edge_ratio", "min_dihedral_angle", "domain_label", "vtkZLibDataCompressor"})
+      CHECK(vtu.find(field) != std::string::npos);
+  }
+}
+
+TEST_CASE("refine: bad arguments are refused, naming the rule", "[refine][cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  struct Case {
+    const char* args;
+    const char* says;
+  };
+  for (const Case& c : {Case{"refine --domain cube --size 0.1", "unknown domain 'cube'"},
+                        Case{"refine --domain torus --size 0", "expected a positive number"},
+                        Case{"refine --domain torus --size -1", "expected a positive number"},
+                        Case{"refine --domain torus --size 0.1 --ratio 1.5", "at least 2"},
+                        Case{"refine --domain torus", "needs --size"},
+                        Case{"refine --size 0.1", "needs --domain"},
+                        Case{"refine --domain torus --size 0.1 --out mesh.stl", "expected a name ending in .vtu"}}) {
+    INFO(c.args);
+    const Result r = run_pdt(d, c.args);
+    CHECK(r.code == 2);
+    CHECK(r.err.find(c.says) != std::string::npos);
+  }
+}
+
+TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  const Result r = run_pdt(d, "refine --domain sphere --size 0.05 --threads 2 --budget 2000");
+  INFO("stdout:\n" << r.out);
+  CHECK(r.code == 1);  // the bounds are missed
+  CHECK(r.out.find("the point budget of 2,000 was hit") != std::string::npos);
+}

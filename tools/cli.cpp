@@ -1,0 +1,68 @@
+#include "cli.hpp"
+
+#include <cstdio>
+#include <cstring>
+
+#include "support/cli_text.hpp"
+#include "support/sys_info.hpp"
+
+namespace pdt_cli {
+
+void usage_error(const char* usage, std::string msg) { throw UsageError{std::move(msg), usage}; }
+
+bool is_help(const std::string& a) { return a == "--help" || a == "-h"; }
+
+bool Args::option(const char* name, bool takes_value) {
+  const std::string& a = a_[i_];
+  const std::size_t n = std::strlen(name);
+  if (a.compare(0, n, name) != 0) return false;
+  if (a.size() == n) {
+    ++i_;
+    if (takes_value) {
+      if (done()) usage_error(usage_, std::string("option ") + name + " needs a value");
+      value_ = a_[i_++];
+    }
+    return true;
+  }
+  if (a[n] != '=') return false;
+  if (!takes_value) usage_error(usage_, std::string("option ") + name + " takes no value");
+  value_ = a.substr(n + 1);
+  ++i_;
+  return true;
+}
+
+std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v) {
+  unsigned long long n = 0;
+  if (pdt::support::parse_count(v, n)) return n;
+  usage_error(args.usage(), std::string(name) + " '" + v + "': expected a non-negative integer");
+}
+
+double parse_real_option(const Args& args, const char* name, const std::string& v) {
+  double d = 0;
+  if (!pdt::support::parse_real(v, d))
+    usage_error(args.usage(), std::string(name) + " '" + v + "': expected a number");
+  return d;
+}
+
+std::string box_string(const pdt::Box& b) {
+  using pdt::support::format_double;
+  const double lo[3] = {b.lo.x, b.lo.y, b.lo.z}, hi[3] = {b.hi.x, b.hi.y, b.hi.z};
+  std::string s;
+  for (int a = 0; a < 3; ++a) {
+    s += a ? "] x [" : "[";
+    s += format_double(lo[a]);
+    s += ", ";
+    s += format_double(hi[a]);
+  }
+  s += "]";
+  return s;
+}
+
+void row(const char* key, const std::string& value) { std::printf("%-16s %s\n", key, value.c_str()); }
+
+std::string per_second(std::uint64_t n, double s) {
+  if (n == 0 || s <= 0) return "";
+  return " (" + pdt::support::format_count(static_cast<std::uint64_t>(static_cast<double>(n) / s)) + "/s)";
+}
+
+}  // namespace pdt_cli

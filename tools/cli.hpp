@@ -1,0 +1,61 @@
+#pragma once
+// The pdt tool's command-line plumbing, shared by its commands: options of
+// the form "--name value" or "--name=value", usage errors (exit 2 with the
+// command's usage), number options, and the summary's rows.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "pdt/geometry.hpp"
+
+namespace pdt_cli {
+
+// A command-line mistake: reported with the command's usage, exit 2.
+struct UsageError {
+  std::string message;
+  const char* usage;
+};
+
+[[noreturn]] void usage_error(const char* usage, std::string msg);
+bool is_help(const std::string& a);
+
+class Args {
+ public:
+  Args(std::vector<std::string> a, const char* usage) : a_(std::move(a)), usage_(usage) {}
+  bool done() const { return i_ >= a_.size(); }
+  const std::string& peek() const { return a_[i_]; }
+  std::string next() { return a_[i_++]; }
+  // If the current argument is option `name`, consumes it and returns true;
+  // the value (for options that take one) is then in value().
+  bool option(const char* name, bool takes_value);
+  const std::string& value() const { return value_; }
+  const char* usage() const { return usage_; }
+
+ private:
+  std::vector<std::string> a_;
+  std::size_t i_ = 0;
+  std::string value_;
+  const char* usage_;
+};
+
+// A non-negative integer option value: "1000000", or "1e6" when integral.
+std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v);
+double parse_real_option(const Args& args, const char* name, const std::string& v);
+
+std::string box_string(const pdt::Box& b);
+// One "key   value" line of a command's summary.
+void row(const char* key, const std::string& value);
+// " (12,345/s)", or "" when there is nothing to say.
+std::string per_second(std::uint64_t n, double s);
+
+// The commands (each in its cmd_<name>.cpp), with their usage texts.
+extern const char* const gen_usage;
+extern const char* const run_usage;
+extern const char* const check_usage;
+extern const char* const refine_usage;
+int cmd_gen(Args args);
+int cmd_run(Args args);
+int cmd_check(Args args);
+int cmd_refine(Args args);
+
+}  // namespace pdt_cli

@@ -1,0 +1,201 @@
+// pdt refine: meshes a domain with the parallel Delaunay refiner of
+// tools/refine (written on pdt's public API only), then reports the mesh.
+#include <cstdio>
+#include <optional>
+#include <string>
+#include <thread>
+#include <unistd.h>
+#include <unordered_map>
+#include <vector>
+
+#include "cli.hpp"
+#include "pdt/pdt.hpp"
+#include "refine/quality.hpp"
+#include "refine/refiner.hpp"
+#include "support/cli_text.hpp"
+#include "support/sys_info.hpp"
+
+namespace pdt_cli {
+
+using pdt::support::ends_with_nocase;
+using pdt::support::format_count;
+using pdt::support::format_megabytes;
+using pdt::support::format_seconds;
+
+const char* const refine_usage =
+    "usage: pdt refine --domain D --size H [options]\n"
+    "\n"
+    "Meshes domain D with tetrahedra: Delaunay refinement on the parallel engine.\n"
+    "Every tetrahedron whose circumcentre is inside D ends with circumradius <= H\n"
+    "and radius-edge ratio <= B, but for a thin protected layer along the surface\n"
+    "(circumcentres within H/4 of a surface sample); points sampled on D's surface\n"
+    "protect it, and vertices that land too close to one (within 3H/4) are removed.\n"
+    "\n"
+    "options:\n"
+    "  --domain D      sphere (radius 1), torus (radii 1 and 0.4, axis z) or gyroid (a gyroid\n"
+    "                  slab in [-1, 1]^3: non-convex, multiply connected)\n"
+    "  --size H        the circumradius bound (and about the surface samples' spacing)\n"
+    "  --ratio B       the radius-edge bound, at least 2 (default 2)\n"
+    "  --threads N     the engine's workers (default: all cores)\n"
+    "  --seed S        which surface samples are kept (default 1)\n"
+    "  --budget N      stop after N points (default 20,000,000); reported when hit\n"
+    "  --out FILE      FILE.vtu: the tetrahedra inside D (centroid inside), with per-cell\n"
+    "                  radius_edge_ratio, min_dihedral_angle and domain_label;\n"
+    "                  FILE.node: the whole triangulation (TetGen .node + .ele)\n"
+    "  --trace FILE    write the operations carried out as a stream (.ops), which\n"
+    "                  `pdt run FILE --threads N` replays\n"
+    "  --validate      check every invariant of the final triangulation\n"
+    "Exit status: 0 done, 1 a bound is missed (the budget was hit) or validation failed, 2 error.\n";
+
+namespace {
+
+// The tetrahedra inside the domain, with their quality as cell data.
+void write_inside_vtu(const std::string& path, const pdt::Triangulation& t, const pdt_refine::Domain& d) {
+  pdt::Mesh m;
+  std::unordered_map<pdt::VertexId, std::uint32_t> node;
+  std::vector<pdt::CellField> fields{{"radius_edge_ratio", {}}, {"min_dihedral_angle", {}}, {"domain_label", {}}};
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_finite_cell(c)) continue;
+    std::array<pdt::Point3, 4> p;
+    for (int i = 0; i < 4; ++i) p[i] = t.point(t.cell_vertex(c, i));
+    const pdt::Point3 centroid{(p[0].x + p[1].x + p[2].x + p[3].x) / 4, (p[0].y + p[1].y + p[2].y + p[3].y) / 4,
+                               (p[0].z + p[1].z + p[2].z + p[3].z) / 4};
+    if (!(d.f(centroid) < 0)) continue;
+    std::array<std::uint32_t, 4> tet{};
+    for (int i = 0; i < 4; ++i) {
+      const pdt::VertexId v = t.cell_vertex(c, i);
+      auto [it, fresh] = node.emplace(v, static_cast<std::uint32_t>(m.points.size()));
+      if (fresh) m.points.push_back(p[i]);
+      tet[i] = it->second;
+    }
+    m.tets.push_back(tet);
+    fields[0].values.push_back(pdt_refine::shape(p).radius_edge);
+    fields[1].values.push_back(pdt_refine::min_dihedral_degrees(p));
+    fields[2].values.push_back(d.label);
+  }
+  pdt::write_vtu(path, m, pdt::VtuEncoding::zlib, fields);
+}
+
+}  // namespace
+
+int cmd_refine(Args args) {
+  std::optional<std::string> domain_name, out, trace;
+  std::optional<double> size;
+  double ratio = 2;
+  unsigned workers = std::max(1u, std::thread::hardware_concurrency());
+  std::uint64_t seed = 1, budget = 20000000;
+  bool validate = false;
+  while (!args.done()) {
+    if (is_help(args.peek())) {
+      std::fputs(refine_usage, stdout);
+      return 0;
+    }
+    if (args.option("--domain", true)) {
+      domain_name = args.value();
+    } else if (args.option("--size", true)) {
+      size = parse_real_option(args, "--size", args.value());
+    } else if (args.option("--ratio", true)) {
+      ratio = parse_real_option(args, "--ratio", args.value());
+    } else if (args.option("--threads", true)) {
+      const std::uint64_t n = parse_count_option(args, "--threads", args.value());
+      if (n > 4096) usage_error(refine_usage, "--threads " + args.value() + ": expected at most 4096");
+      workers = n == 0 ? std::max(1u, std::thread::hardware_concurrency()) : static_cast<unsigned>(n);
+    } else if (args.option("--seed", true)) {
+      seed = parse_count_option(args, "--seed", args.value());
+    } else if (args.option("--budget", true)) {
+      budget = parse_count_option(args, "--budget", args.value());
+    } else if (args.option("--out", true)) {
+      out = args.value();
+    } else if (args.option("--trace", true)) {
+      trace = args.value();
+    } else if (args.option("--validate", false)) {
+      validate = true;
+    } else {
+      usage_error(refine_usage, "unknown option '" + args.peek() + "' for 'refine'");
+    }
+  }
+  if (!domain_name) usage_error(refine_usage, std::string("refine needs --domain (") + pdt_refine::domain_names() + ")");
+  if (!size) usage_error(refine_usage, "refine needs --size H (the circumradius bound, e.g. 0.1)");
+  if (!(*size > 0)) usage_error(refine_usage, "--size " + pdt::support::format_double(*size) + ": expected a positive number");
+  if (ratio < pdt_refine::min_ratio)
+    usage_error(refine_usage, "--ratio " + pdt::support::format_double(ratio) +
+                                  ": expected at least 2 (below Shewchuk's bound Delaunay refinement need not terminate)");
+  if (out && !ends_with_nocase(*out, ".vtu") && !ends_with_nocase(*out, ".node") && !ends_with_nocase(*out, ".ele"))
+    usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
+  pdt_refine::RefineOptions o;
+  try {
+    o.domain = pdt_refine::domain_by_name(*domain_name);
+  } catch (const pdt::Error& e) {
+    usage_error(refine_usage, e.what());
+  }
+  o.size = *size;
+  o.ratio = ratio;
+  o.workers = workers;
+  o.seed = seed;
+  o.budget = budget;
+  o.trace = trace.value_or("");
+  const bool tty = ::isatty(STDERR_FILENO) == 1;
+  if (tty)
+    o.progress = [](std::uint64_t vertices, std::uint64_t queued, double s) {
+      std::fprintf(stderr, "\rrefining: %s vertices, %s cells to look at, %s   ", format_count(vertices).c_str(),
+                   format_count(queued).c_str(), format_seconds(s).c_str());
+      std::fflush(stderr);
+    };
+
+  pdt::Triangulation t;
+  const pdt_refine::RefineStats st = pdt_refine::refine(t, o);
+  if (tty) std::fputs("\r\033[K", stderr);
+  const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed);
+
+  char buf[256];
+  row("domain", o.domain.name + ", size " + pdt::support::format_double(o.size) + ", ratio " +
+                    pdt::support::format_double(o.ratio));
+  row("threads", std::to_string(st.workers) + " workers (parallel engine, allocator " + pdt::allocator_name() + ")");
+  row("vertices", format_count(t.number_of_vertices()));
+  row("tets inside", format_count(q.inside) + " (of " + format_count(t.number_of_finite_cells()) + ")");
+  row("insertions", format_count(st.insertions) + " (" + format_count(st.circumcentres) + " circumcentres, " +
+                        format_count(st.samples) + " of " + format_count(st.surface_samples) + " surface samples)");
+  row("removals", format_count(st.removals) + " (vertices too close to a surface sample)");
+  row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
+  std::snprintf(buf, sizeof buf,
+                "%.3f radius-edge (bound %.3f), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
+                "protected layer along the surface)",
+                q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
+                format_count(q.protected_layer).c_str());
+  row("worst inside", buf);
+  std::snprintf(buf, sizeof buf, "%.2f degrees (smallest dihedral angle inside)", q.min_dihedral);
+  row("dihedral", buf);
+  int status = 0;
+  if (q.violations) {
+    row("bounds", format_count(q.violations) + " tets with their circumcentre inside (out of the protected layer) miss a bound" +
+                      (st.budget_hit ? " (the point budget of " + format_count(o.budget) + " was hit)" : ""));
+    status = 1;
+  } else {
+    row("bounds", std::string("met by every tet whose circumcentre is inside, out of the protected layer") +
+                      (st.budget_hit ? " (the point budget was hit)" : ""));
+  }
+  row("peak memory", format_megabytes(pdt::support::peak_rss_bytes()));
+  const pdt::WorkerStats w = st.engine.total();
+  std::snprintf(buf, sizeof buf, "%s completed, %s rollbacks, %s steals, %s escalated, imbalance %.2f",
+                format_count(w.completed).c_str(), format_count(w.rollbacks).c_str(), format_count(w.steals).c_str(),
+                format_count(w.escalated).c_str(), st.engine.imbalance());
+  row("workers", buf);
+  if (validate) {
+    std::string why;
+    const bool ok = t.validate(&why);
+    row("validate", ok ? std::string("ok") : "FAILED: " + why);
+    if (!ok) status = 1;
+  }
+  if (out) {
+    if (ends_with_nocase(*out, ".vtu"))
+      write_inside_vtu(*out, t, o.domain);
+    else
+      pdt::write_tetgen(*out, t);
+    row("wrote", *out);
+  }
+  if (trace) row("trace", *trace + " (pdt run " + *trace + " --threads N replays it)");
+  std::fflush(stdout);
+  return status;
+}
+
+}  // namespace pdt_cli

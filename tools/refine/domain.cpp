@@ -1,0 +1,121 @@
+#include "refine/domain.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <random>
+#include <unordered_map>
+
+#include "pdt/error.hpp"
+
+namespace pdt_refine {
+
+namespace {
+
+using pdt::Point3;
+
+double sphere(const Point3& p) { return std::sqrt(p.x * p.x + p.y * p.y + p.z * p.z) - 1; }
+
+double torus(const Point3& p) {
+  const double r = std::sqrt(p.x * p.x + p.y * p.y) - 1;
+  return std::sqrt(r * r + p.z * p.z) - 0.4;
+}
+
+// The gyroid's level function at frequency pi, divided by its gradient's
+// length so that near the surface it is about a distance; the slab is
+// |g| < 0.6 (in those units: about 0.12), cut by the cube [-1, 1]^3.
+double gyroid(const Point3& p) {
+  const double k = M_PI;
+  const double x = k * p.x, y = k * p.y, z = k * p.z;
+  const double g = std::sin(x) * std::cos(y) + std::sin(y) * std::cos(z) + std::sin(z) * std::cos(x);
+  const double gx = k * (std::cos(x) * std::cos(y) - std::sin(z) * std::sin(x));
+  const double gy = k * (-std::sin(x) * std::sin(y) + std::cos(y) * std::cos(z));
+  const double gz = k * (-std::sin(y) * std::sin(z) + std::cos(z) * std::cos(x));
+  const double grad = std::max(std::sqrt(gx * gx + gy * gy + gz * gz), 0.5);
+  const double slab = (std::fabs(g) - 0.6) / grad;
+  const double cube = std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}) - 1;
+  return std::max(slab, cube);
+}
+
+Point3 gradient(double (*f)(const Point3&), const Point3& p, double h) {
+  return {(f({p.x + h, p.y, p.z}) - f({p.x - h, p.y, p.z})) / (2 * h),
+          (f({p.x, p.y + h, p.z}) - f({p.x, p.y - h, p.z})) / (2 * h),
+          (f({p.x, p.y, p.z + h}) - f({p.x, p.y, p.z - h})) / (2 * h)};
+}
+
+}  // namespace
+
+const char* domain_names() { return "sphere, torus, gyroid"; }
+
+Domain domain_by_name(const std::string& name) {
+  if (name == "sphere") return {"sphere", {{-1.5, -1.5, -1.5}, {1.5, 1.5, 1.5}}, sphere, 1};
+  if (name == "torus") return {"torus", {{-1.9, -1.9, -0.9}, {1.9, 1.9, 0.9}}, torus, 1};
+  if (name == "gyroid") return {"gyroid", {{-1.5, -1.5, -1.5}, {1.5, 1.5, 1.5}}, gyroid, 1};
+  throw pdt::Error(pdt::ErrorCode::invalid_argument,
+                   "unknown domain '" + name + "'; expected one of: " + domain_names());
+}
+
+std::vector<Point3> surface_samples(const Domain& d, double spacing, std::uint64_t seed) {
+  // Candidates: the centres of grid cells (of size spacing) whose corners
+  // disagree on the side of the surface, projected onto it.
+  const double h = spacing;
+  const int nx = static_cast<int>(std::ceil((d.box.hi.x - d.box.lo.x) / h));
+  const int ny = static_cast<int>(std::ceil((d.box.hi.y - d.box.lo.y) / h));
+  const int nz = static_cast<int>(std::ceil((d.box.hi.z - d.box.lo.z) / h));
+  auto at = [&](int i, int j, int k) { return Point3{d.box.lo.x + i * h, d.box.lo.y + j * h, d.box.lo.z + k * h}; };
+  std::vector<Point3> candidates;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        bool in = false, out = false;
+        for (int c = 0; c < 8; ++c) {
+          const double v = d.f(at(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)));
+          (v < 0 ? in : out) = true;
+        }
+        if (!(in && out)) continue;
+        Point3 p = at(i, j, k);
+        p = {p.x + h / 2, p.y + h / 2, p.z + h / 2};
+        for (int step = 0; step < 20; ++step) {  // Newton on f along its gradient
+          const double v = d.f(p);
+          if (std::fabs(v) < 1e-12) break;
+          const Point3 g = gradient(d.f, p, 1e-7);
+          const double g2 = g.x * g.x + g.y * g.y + g.z * g.z;
+          if (!(g2 > 0)) break;
+          p = {p.x - v * g.x / g2, p.y - v * g.y / g2, p.z - v * g.z / g2};
+        }
+        if (std::fabs(d.f(p)) < 1e-6 && d.box.contains(p)) candidates.push_back(p);
+      }
+  // Thin them, in a seeded order, so that no two are closer than spacing / 2.
+  std::mt19937_64 rng(seed);
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  const double r = spacing / 2;
+  auto key = [&](const Point3& p) {
+    const auto c = [&](double v, double lo) { return static_cast<std::int64_t>(std::floor((v - lo) / r)); };
+    return std::array<std::int64_t, 3>{c(p.x, d.box.lo.x), c(p.y, d.box.lo.y), c(p.z, d.box.lo.z)};
+  };
+  struct Hash {
+    std::size_t operator()(const std::array<std::int64_t, 3>& k) const {
+      return static_cast<std::size_t>(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+    }
+  };
+  std::unordered_map<std::array<std::int64_t, 3>, std::vector<Point3>, Hash> near;
+  std::vector<Point3> kept;
+  for (const Point3& p : candidates) {
+    const auto k = key(p);
+    bool clear = true;
+    for (int dz = -1; dz <= 1 && clear; ++dz)
+      for (int dy = -1; dy <= 1 && clear; ++dy)
+        for (int dx = -1; dx <= 1 && clear; ++dx) {
+          auto it = near.find({k[0] + dx, k[1] + dy, k[2] + dz});
+          if (it == near.end()) continue;
+          for (const Point3& q : it->second)
+            if ((p.x - q.x) * (p.x - q.x) + (p.y - q.y) * (p.y - q.y) + (p.z - q.z) * (p.z - q.z) < r * r) clear = false;
+        }
+    if (!clear) continue;
+    near[k].push_back(p);
+    kept.push_back(p);
+  }
+  return kept;
+}
+
+}  // namespace pdt_refine

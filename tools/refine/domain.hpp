@@ -1,0 +1,35 @@
+#pragma once
+// The domains pdt refine meshes: implicit shapes, inside where f(p) < 0, and
+// the points that sample their boundary surface.
+//   sphere  centre at the origin, radius 1
+//   torus   axis z, centre at the origin, major radius 1, minor radius 0.4
+//   gyroid  a gyroid slab in the cube [-1, 1]^3: |sin x cos y + sin y cos z +
+//           sin z cos x| < 0.6 at frequency pi: non-convex, multiply connected
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "pdt/geometry.hpp"
+
+namespace pdt_refine {
+
+struct Domain {
+  std::string name;
+  pdt::Box box;  // holds the domain, with a margin
+  // Signed function, < 0 inside, about the distance to the surface near it.
+  double (*f)(const pdt::Point3&);
+  int label = 1;  // the label written for the domain's tetrahedra
+};
+
+// The domain called name; throws pdt::Error(invalid_argument) listing the
+// known ones for any other name.
+Domain domain_by_name(const std::string& name);
+const char* domain_names();  // "sphere, torus, gyroid"
+
+// Points on the domain's surface, about `spacing` apart and never closer than
+// spacing / 2 to each other: a grid of cells of that size, each cell the
+// surface crosses projected onto the surface (Newton steps on f), then thinned
+// in an order drawn from the seed (the seed picks which ones stay).
+std::vector<pdt::Point3> surface_samples(const Domain& d, double spacing, std::uint64_t seed);
+
+}  // namespace pdt_refine

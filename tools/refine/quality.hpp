@@ -1,0 +1,70 @@
+#pragma once
+// Tetrahedron measures a Delaunay refiner judges cells by, in doubles: the
+// circumcentre and circumradius, the radius-edge ratio, the dihedral angles.
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "pdt/geometry.hpp"
+
+namespace pdt_refine {
+
+using pdt::Point3;
+
+inline Point3 sub(const Point3& a, const Point3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline double dot(const Point3& a, const Point3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Point3 cross(const Point3& a, const Point3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double norm2(const Point3& a) { return dot(a, a); }
+inline double dist2(const Point3& a, const Point3& b) { return norm2(sub(a, b)); }
+
+struct TetShape {
+  Point3 circumcentre;
+  double circumradius = 0;
+  double shortest_edge = 0;
+  double radius_edge = 0;  // circumradius / shortest edge
+  bool ok = false;          // false for a flat tetrahedron (no finite circumsphere)
+};
+
+// Computed relative to p[0], so the numbers stay small near the tetrahedron.
+inline TetShape shape(const std::array<Point3, 4>& p) {
+  TetShape s;
+  const Point3 a = sub(p[1], p[0]), b = sub(p[2], p[0]), c = sub(p[3], p[0]);
+  const double det = 2 * dot(a, cross(b, c));
+  if (!(std::fabs(det) > 0)) return s;
+  const Point3 num{norm2(a) * cross(b, c).x + norm2(b) * cross(c, a).x + norm2(c) * cross(a, b).x,
+                   norm2(a) * cross(b, c).y + norm2(b) * cross(c, a).y + norm2(c) * cross(a, b).y,
+                   norm2(a) * cross(b, c).z + norm2(b) * cross(c, a).z + norm2(c) * cross(a, b).z};
+  const Point3 o{num.x / det, num.y / det, num.z / det};
+  s.circumcentre = {p[0].x + o.x, p[0].y + o.y, p[0].z + o.z};
+  s.circumradius = std::sqrt(norm2(o));
+  double shortest = HUGE_VAL;
+  for (int i = 0; i < 4; ++i)
+    for (int j = i + 1; j < 4; ++j) shortest = std::min(shortest, dist2(p[i], p[j]));
+  s.shortest_edge = std::sqrt(shortest);
+  s.radius_edge = s.shortest_edge > 0 ? s.circumradius / s.shortest_edge : HUGE_VAL;
+  s.ok = std::isfinite(s.circumradius) && std::isfinite(s.radius_edge);
+  return s;
+}
+
+// The smallest of the six dihedral angles, in degrees.
+inline double min_dihedral_degrees(const std::array<Point3, 4>& p) {
+  static constexpr int edge[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+  double smallest = 180;
+  for (const auto& e : edge) {
+    int o[2], k = 0;
+    for (int v = 0; v < 4; ++v)
+      if (v != e[0] && v != e[1]) o[k++] = v;
+    // The angle between the two faces through edge e: normals of (e0, e1, o0) and (e0, e1, o1).
+    const Point3 u = sub(p[e[1]], p[e[0]]);
+    Point3 n0 = cross(u, sub(p[o[0]], p[e[0]])), n1 = cross(u, sub(p[o[1]], p[e[0]]));
+    const double l = std::sqrt(norm2(n0) * norm2(n1));
+    if (!(l > 0)) return 0;
+    const double cosine = std::clamp(dot(n0, n1) / l, -1.0, 1.0);
+    smallest = std::min(smallest, std::acos(cosine) * 180 / M_PI);
+  }
+  return smallest;
+}
+
+}  // namespace pdt_refine

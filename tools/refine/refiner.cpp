@@ -1,0 +1,499 @@
+#include "refine/refiner.hpp"
+
+#include <oneapi/tbb/concurrent_queue.h>
+#include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/task_arena.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <coroutine>
+#include <cstdio>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "refine/quality.hpp"
+
+namespace pdt_refine {
+
+namespace {
+
+using pdt::Point3;
+
+// The refiner's own data per cell: the incarnation of the live cell with
+// that id (0: none), written by the change hook inside the operation that
+// makes or deletes the cell. Chunks of 2^16 ids, allocated when first needed.
+class CellTable {
+ public:
+  CellTable() : chunks_(std::make_unique<std::atomic<Chunk*>[]>(max_chunks)) {}
+  ~CellTable() {
+    for (std::size_t i = 0; i < max_chunks; ++i) delete chunks_[i].load();
+  }
+  void set(pdt::CellId c, std::uint32_t incarnation) { slot(c).store(incarnation, std::memory_order_release); }
+  std::uint32_t get(pdt::CellId c) { return slot(c).load(std::memory_order_acquire); }
+
+ private:
+  static constexpr std::size_t chunk_bits = 16, max_chunks = std::size_t{1} << 16;
+  struct Chunk {
+    std::atomic<std::uint32_t> v[std::size_t{1} << chunk_bits] = {};
+  };
+  std::atomic<std::uint32_t>& slot(pdt::CellId c) {
+    std::atomic<Chunk*>& ptr = chunks_[c >> chunk_bits];
+    Chunk* chunk = ptr.load(std::memory_order_acquire);
+    if (!chunk) {
+      auto* fresh = new Chunk();
+      if (ptr.compare_exchange_strong(chunk, fresh, std::memory_order_acq_rel))
+        chunk = fresh;
+      else
+        delete fresh;  // another thread got there first; `chunk` is its
+    }
+    return chunk->v[c & ((std::size_t{1} << chunk_bits) - 1)];
+  }
+  std::unique_ptr<std::atomic<Chunk*>[]> chunks_;
+};
+
+// The surface samples, found by a grid of cells of the protecting radius.
+class Samples {
+ public:
+  Samples(std::vector<Point3> pts, double cell) : pts_(std::move(pts)), cell_(cell), state_(pts_.size()) {
+    for (std::uint32_t i = 0; i < pts_.size(); ++i) {
+      grid_[key(pts_[i])].push_back(i);
+      index_.emplace(pts_[i], i);
+    }
+  }
+  std::size_t size() const { return pts_.size(); }
+  const Point3& operator[](std::uint32_t i) const { return pts_[i]; }
+  // The nearest sample within r of p, or -1.
+  std::int64_t nearest_within(const Point3& p, double r) const { return nearest(p, r, false); }
+  // The nearest sample within r of p that nobody has claimed yet, or -1.
+  std::int64_t nearest_free_within(const Point3& p, double r) const { return nearest(p, r, true); }
+  std::int64_t nearest(const Point3& p, double r, bool free_only) const {
+    const auto k = key(p);
+    const std::int64_t reach = std::min<std::int64_t>(static_cast<std::int64_t>(std::ceil(r / cell_)), 64);
+    std::int64_t best = -1;
+    double best_d2 = r * r;
+    for (std::int64_t dz = -reach; dz <= reach; ++dz)
+      for (std::int64_t dy = -reach; dy <= reach; ++dy)
+        for (std::int64_t dx = -reach; dx <= reach; ++dx) {
+          auto it = grid_.find({k[0] + dx, k[1] + dy, k[2] + dz});
+          if (it == grid_.end()) continue;
+          for (std::uint32_t i : it->second)
+            if (const double d2 = dist2(p, pts_[i]);
+                d2 < best_d2 && (!free_only || state_[i].load(std::memory_order_relaxed) == 0))
+              best_d2 = d2, best = i;
+        }
+    return best;
+  }
+  bool is_sample(const Point3& p) const { return index_.count(p) != 0; }
+  // The first caller wins the right to insert sample i.
+  bool claim(std::uint32_t i) {
+    std::uint8_t expect = 0;
+    return state_[i].compare_exchange_strong(expect, 1);
+  }
+
+ private:
+  using Key = std::array<std::int64_t, 3>;
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      return static_cast<std::size_t>(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+    }
+  };
+  struct PointHash {
+    std::size_t operator()(const Point3& p) const {
+      std::size_t h = std::hash<double>()(p.x);
+      h ^= std::hash<double>()(p.y) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+      return h ^ (std::hash<double>()(p.z) + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2));
+    }
+  };
+  Key key(const Point3& p) const {
+    return {static_cast<std::int64_t>(std::floor(p.x / cell_)), static_cast<std::int64_t>(std::floor(p.y / cell_)),
+            static_cast<std::int64_t>(std::floor(p.z / cell_))};
+  }
+  std::vector<Point3> pts_;
+  double cell_;
+  std::vector<std::atomic<std::uint8_t>> state_;  // 0: not inserted; 1: claimed (inserted or on its way)
+  std::unordered_map<Key, std::vector<std::uint32_t>, KeyHash> grid_;
+  std::unordered_map<Point3, std::uint32_t, PointHash> index_;
+};
+
+// The stream actually carried out, as an .ops file: each operation is
+// written by the change hook, inside the operation (so the file's order is
+// one in which conflicting operations happened), with insertions numbered in
+// that order and removals naming them.
+class Trace {
+ public:
+  explicit Trace(const std::string& path, const pdt::Box& box) : path_(path) {
+    if (path.empty()) return;
+    f_ = std::fopen(path.c_str(), "w");
+    if (!f_) throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path + "'");
+    std::fprintf(f_, "# pdt refine trace: the operations carried out, in an order they happened\n");
+    std::fprintf(f_, "box %.17g %.17g %.17g %.17g %.17g %.17g\n", box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y,
+                 box.hi.z);
+  }
+  ~Trace() {
+    if (f_) std::fclose(f_);
+  }
+  void inserted(std::uint64_t incarnation, const Point3& p) {
+    if (!f_) return;
+    std::lock_guard lock(m_);
+    std::fprintf(f_, "i %.17g %.17g %.17g\n", p.x, p.y, p.z);
+    index_of_[incarnation] = next_++;
+  }
+  // A duplicate insertion and its undo (the refiner never keeps one): both
+  // written, so the stream stays the one carried out.
+  std::uint64_t duplicate(const Point3& p) {
+    if (!f_) return 0;
+    std::lock_guard lock(m_);
+    std::fprintf(f_, "i %.17g %.17g %.17g\n", p.x, p.y, p.z);
+    return next_++;
+  }
+  void removed_insertion(std::uint64_t k) {
+    if (!f_) return;
+    std::lock_guard lock(m_);
+    std::fprintf(f_, "r %llu\n", static_cast<unsigned long long>(k));
+  }
+  void removed(std::uint64_t incarnation) {
+    if (!f_) return;
+    std::lock_guard lock(m_);
+    auto it = index_of_.find(incarnation);
+    if (it == index_of_.end()) return;
+    std::fprintf(f_, "r %llu\n", static_cast<unsigned long long>(it->second));
+    index_of_.erase(it);
+  }
+  void close() {
+    if (!f_) return;
+    const bool bad = std::ferror(f_) != 0;
+    if (std::fclose(f_) != 0 || bad) {
+      f_ = nullptr;
+      throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path_ + "' (disk full?)");
+    }
+    f_ = nullptr;
+  }
+
+ private:
+  std::string path_;
+  std::FILE* f_ = nullptr;
+  std::mutex m_;
+  std::uint64_t next_ = 0;
+  std::unordered_map<std::uint64_t, std::uint64_t> index_of_;  // live vertex incarnation -> its insertion
+};
+
+struct Bad {
+  pdt::CellHandle cell;
+  Point3 circumcentre;
+  double radius = 0;
+  bool too_big_or_skinny = false;  // else bad only for a missing surface sample
+};
+
+struct Detached {
+  struct promise_type {
+    Detached get_return_object() noexcept { return {}; }
+    std::suspend_never initial_suspend() noexcept { return {}; }
+    std::suspend_never final_suspend() noexcept { return {}; }
+    void return_void() noexcept {}
+    void unhandled_exception() { throw; }  // the engine catches it; drain() rethrows
+  };
+};
+
+class Refiner {
+ public:
+  Refiner(const RefineOptions& o, pdt::Engine& e, Trace& trace)
+      : o_(o),
+        e_(e),
+        trace_(trace),
+        samples_(surface_samples(o.domain, o.size, o.seed), 0.5 * o.size),
+        snap_(snap_radius(o.size)),
+        protect_(protect_radius(o.size)) {}
+
+  // Inside every operation that makes or deletes a vertex, on its worker.
+  void on_change(const pdt::Changes& c) {
+    for (const pdt::CellHandle& h : c.destroyed) cells_.set(h.id, 0);
+    for (const pdt::CellView& v : c.created) {
+      cells_.set(v.handle.id, v.handle.incarnation);
+      if (!v.finite()) continue;
+      const TetShape s = shape(v.points);
+      if (!s.ok || !(o_.domain.f(s.circumcentre) < 0)) continue;
+      if (s.circumradius > o_.size || s.radius_edge > o_.ratio) push({v.handle, s.circumcentre, s.circumradius, true});
+    }
+    if (c.kind == pdt::OpKind::remove) {
+      trace_.removed(c.vertex.incarnation);
+      return;
+    }
+    // An insertion: its point is in every cell it made (or, with no cell yet,
+    // it is one of the first points).
+    Point3 p{};
+    bool found = false;
+    for (const pdt::CellView& v : c.created)
+      for (int i = 0; i < 4 && !found; ++i)
+        if (v.vertices[i] == c.vertex.id) p = v.points[i], found = true;
+    if (!found) p = corners_[std::max(0, corner_now_.load())];  // one of the first corners: no cell yet
+    trace_.inserted(c.vertex.incarnation, p);
+    if (!samples_.is_sample(p)) return;
+    // A sample: the vertices (not samples) inside its protecting ball go. The
+    // ids are live while the operation holds them; a removal submitted now
+    // is pinned to the incarnation it sees.
+    std::vector<pdt::VertexId> doomed;
+    for (const pdt::CellView& v : c.created)
+      for (int i = 0; i < 4; ++i) {
+        const pdt::VertexId w = v.vertices[i];
+        if (w == pdt::infinite_vertex || w == c.vertex.id) continue;
+        if (dist2(v.points[i], p) < protect_ * protect_ && !samples_.is_sample(v.points[i]) &&
+            std::find(doomed.begin(), doomed.end(), w) == doomed.end())
+          doomed.push_back(w);
+      }
+    for (pdt::VertexId w : doomed) {
+      removals_.fetch_add(1, std::memory_order_relaxed);
+      e_.remove(w, {});
+    }
+  }
+
+  // A refiner coroutine: cells from the queue until it is empty.
+  Detached work() {
+    Bad b;
+    while (!stop_.load(std::memory_order_relaxed) && pop(b)) {
+      if (cells_.get(b.cell.id) != b.cell.incarnation) {
+        dead_.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      if (insertions_.load(std::memory_order_relaxed) >= o_.budget) {
+        budget_hit_.store(true);
+        stop_.store(true);
+        break;
+      }
+      insertions_.fetch_add(1, std::memory_order_relaxed);
+      // Within a sample's snap radius: never the circumcentre. The sample
+      // instead if it is not in yet (then this cell is judged again), else
+      // nothing: the cell lies in the protected layer along the surface.
+      if (const std::int64_t near = samples_.nearest_within(b.circumcentre, snap_); near >= 0) {
+        if (samples_.claim(static_cast<std::uint32_t>(near))) {
+          samples_inserted_.fetch_add(1, std::memory_order_relaxed);
+          co_await insert_once(samples_[static_cast<std::uint32_t>(near)]);
+          push(b);
+        } else {
+          protected_.fetch_add(1, std::memory_order_relaxed);
+          insertions_.fetch_sub(1, std::memory_order_relaxed);
+        }
+        continue;
+      }
+      // Only if the cell is still alive when the insertion runs: two cells
+      // with (nearly) one circumsphere, judged at once, must not both put
+      // their (nearly equal) circumcentres in.
+      const pdt::InsertResult r = co_await e_.insert_if_alive(b.circumcentre, b.cell);
+      if (r.vertex == pdt::no_vertex) {
+        dead_.fetch_add(1, std::memory_order_relaxed);
+        insertions_.fetch_sub(1, std::memory_order_relaxed);
+      } else {
+        circumcentres_.fetch_add(1, std::memory_order_relaxed);
+        if (!r.inserted) undo_duplicate(r.vertex, b.circumcentre);
+      }
+    }
+  }
+
+  // co_await insert_once(p): inserts p; if it was there already (two cells
+  // with one circumcentre, judged at once), undoes the duplicate, so that no
+  // vertex keeps a multiplicity.
+  struct InsertOnce {
+    Refiner* r;
+    Point3 p;
+    pdt::InsertAwaitable insertion;
+    bool await_ready() { return false; }
+    bool await_suspend(std::coroutine_handle<> h) { return insertion.await_suspend(h); }
+    void await_resume() {
+      const pdt::InsertResult res = insertion.await_resume();
+      if (!res.inserted) r->undo_duplicate(res.vertex, p);
+    }
+  };
+  InsertOnce insert_once(const Point3& p) { return InsertOnce{this, p, e_.insert(p)}; }
+  Detached undo_duplicate(pdt::VertexId v, Point3 p) {
+    const std::uint64_t k = trace_.duplicate(p);
+    (void)co_await e_.remove(v);  // lowers the multiplicity back to 1: no change to report
+    trace_.removed_insertion(k);
+  }
+
+  // The box's corners first, so that the triangulation covers the domain;
+  // then a coarse lattice inside it (spacing 3 * size, jittered by the seed
+  // against exactly cospherical cells), so that its cells have circumcentres
+  // inside and refinement has somewhere to start.
+  void start() {
+    const pdt::Box& b = o_.domain.box;
+    for (int k = 0; k < 8; ++k) {
+      corners_[k] = {k & 1 ? b.hi.x : b.lo.x, k & 2 ? b.hi.y : b.lo.y, k & 4 ? b.hi.z : b.lo.z};
+      insertions_.fetch_add(1);
+      corner_now_.store(k);
+      e_.insert(corners_[k], {});
+      e_.drain();  // one at a time: the hook knows which corner it sees
+    }
+    corner_now_.store(-1);
+    const double h = 3 * o_.size;
+    std::mt19937_64 rng(o_.seed ^ 0x5DEECE66Dull);
+    std::uniform_real_distribution<double> jitter(-0.05 * h, 0.05 * h);
+    std::vector<Point3> seeds;
+    for (double z = b.lo.z + h / 2; z < b.hi.z; z += h)
+      for (double y = b.lo.y + h / 2; y < b.hi.y; y += h)
+        for (double x = b.lo.x + h / 2; x < b.hi.x; x += h) {
+          const Point3 p{x + jitter(rng), y + jitter(rng), z + jitter(rng)};
+          if (o_.domain.f(p) < -o_.size) seeds.push_back(p);  // well inside: clear of the surface
+        }
+    insertions_.fetch_add(seeds.size());
+    e_.insert_batch(seeds);
+    e_.drain();
+  }
+  // The surface samples no refinement step has asked for yet: all at once.
+  // Each one's insertion removes the vertices inside its protecting ball (the
+  // hook), and the cells that makes are judged again.
+  std::size_t insert_remaining_samples() {
+    std::vector<Point3> rest;
+    for (std::uint32_t i = 0; i < samples_.size(); ++i)
+      if (samples_.claim(i)) rest.push_back(samples_[i]);
+    if (rest.empty() || insertions_.load() + rest.size() > o_.budget) return 0;
+    insertions_.fetch_add(rest.size());
+    samples_inserted_.fetch_add(rest.size());
+    e_.insert_batch(rest);
+    return rest.size();
+  }
+  std::uint64_t queued() const { return queued_.load(std::memory_order_relaxed); }
+  bool stopped() const { return stop_.load(); }
+
+  void fill(RefineStats& st) const {
+    st.insertions = insertions_.load();
+    st.samples = samples_inserted_.load();
+    st.circumcentres = circumcentres_.load();
+    st.removals = removals_.load();
+    st.dead_skipped = dead_.load();
+    st.protected_skipped = protected_.load();
+    st.budget_hit = budget_hit_.load();
+    st.surface_samples = samples_.size();
+  }
+
+ private:
+  void push(const Bad& b) {
+    queued_.fetch_add(1, std::memory_order_relaxed);
+    queue_.push(b);
+  }
+  bool pop(Bad& b) {
+    if (!queue_.try_pop(b)) return false;
+    queued_.fetch_sub(1, std::memory_order_relaxed);
+    return true;
+  }
+  const RefineOptions& o_;
+  pdt::Engine& e_;
+  Trace& trace_;
+  Samples samples_;
+  double snap_, protect_;
+  CellTable cells_;
+  tbb::concurrent_queue<Bad> queue_;
+  std::array<Point3, 8> corners_{};
+  std::atomic<int> corner_now_{-1};  // the corner being inserted, while start() runs
+  std::atomic<std::uint64_t> queued_{0};
+  std::atomic<bool> stop_{false}, budget_hit_{false};
+  std::atomic<std::uint64_t> insertions_{0}, samples_inserted_{0}, circumcentres_{0}, removals_{0}, dead_{0},
+      protected_{0};
+};
+
+}  // namespace
+
+RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
+  auto bad = [](const std::string& what) { throw pdt::Error(pdt::ErrorCode::invalid_argument, what); };
+  if (!(o.size > 0) || !std::isfinite(o.size)) bad("the size bound must be a positive number, not " + std::to_string(o.size));
+  if (!(o.ratio >= min_ratio) || !std::isfinite(o.ratio))
+    bad("the radius-edge bound must be at least " + std::to_string(min_ratio).substr(0, 3) +
+        " (below it Delaunay refinement need not terminate), not " + std::to_string(o.ratio));
+  if (o.workers == 0) bad("the refiner needs at least one worker");
+  const double extent = std::max({o.domain.box.hi.x - o.domain.box.lo.x, o.domain.box.hi.y - o.domain.box.lo.y,
+                                  o.domain.box.hi.z - o.domain.box.lo.z});
+  if (o.size < extent * 1e-4) bad("the size bound is too small for this domain (at most 10^4 cells per axis)");
+  RefineStats st;
+  st.workers = o.workers;
+  const auto start = std::chrono::steady_clock::now();
+  auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
+  const unsigned threads = std::min(o.workers, std::max(1u, std::thread::hardware_concurrency()));
+  tbb::global_control parallelism(
+      tbb::global_control::max_allowed_parallelism,
+      std::max<std::size_t>(threads + 1, tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
+  tbb::task_arena arena(static_cast<int>(threads), 0);
+  Trace trace(o.trace, o.domain.box);
+  {
+    pdt::EngineOptions eo = pdt::EngineOptions::from_environment();
+    eo.workers = o.workers;
+    pdt::Engine e(t, o.domain.box, eo, &arena);
+    Refiner r(o, e, trace);
+    e.set_change_hook([&r](const pdt::Changes& c) { r.on_change(c); }, true);
+    r.start();
+    // Rounds: refiner coroutines until the queue is empty, then drain (the
+    // operations still running may queue more cells), until nothing is left.
+    const unsigned coroutines = 4 * o.workers;
+    bool surface_done = false;
+    while (!r.stopped()) {
+      if (r.queued() == 0) {
+        // Refined as far as the interior asked: now the rest of the surface.
+        if (surface_done || r.insert_remaining_samples() == 0) break;
+        surface_done = true;
+        e.drain();
+        continue;
+      }
+      arena.execute([&] {
+        for (unsigned k = 0; k < coroutines; ++k) r.work();
+      });
+      // drain() blocks: report progress from here meanwhile.
+      std::atomic<bool> drained{false};
+      std::thread reporter;
+      if (o.progress)
+        reporter = std::thread([&] {
+          while (!drained.load()) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(250));
+            if (!drained.load()) o.progress(t.number_of_vertices(), r.queued(), seconds());
+          }
+        });
+      try {
+        e.drain();
+      } catch (...) {
+        drained.store(true);
+        if (reporter.joinable()) reporter.join();
+        throw;
+      }
+      drained.store(true);
+      if (reporter.joinable()) reporter.join();
+    }
+    r.fill(st);
+    st.engine = e.stats();
+  }
+  trace.close();
+  st.seconds = seconds();
+  return st;
+}
+
+MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed) {
+  MeshQuality q;
+  const Samples samples(surface_samples(d, size, seed), 0.5 * size);
+  const double snap = snap_radius(size);
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_finite_cell(c)) continue;
+    std::array<Point3, 4> p;
+    for (int i = 0; i < 4; ++i) p[i] = t.point(t.cell_vertex(c, i));
+    const Point3 centroid{(p[0].x + p[1].x + p[2].x + p[3].x) / 4, (p[0].y + p[1].y + p[2].y + p[3].y) / 4,
+                          (p[0].z + p[1].z + p[2].z + p[3].z) / 4};
+    if (d.f(centroid) < 0) {
+      ++q.inside;
+      q.min_dihedral = std::min(q.min_dihedral, min_dihedral_degrees(p));
+    }
+    const TetShape s = shape(p);
+    if (!s.ok || !(d.f(s.circumcentre) < 0)) continue;
+    if (samples.nearest_within(s.circumcentre, snap) >= 0) {
+      ++q.protected_layer;
+      continue;
+    }
+    ++q.judged;
+    q.worst_ratio = std::max(q.worst_ratio, s.radius_edge);
+    q.largest_radius = std::max(q.largest_radius, s.circumradius);
+    if (s.circumradius > size || s.radius_edge > ratio) ++q.violations;
+  }
+  return q;
+}
+
+}  // namespace pdt_refine

@@ -1,0 +1,85 @@
+#pragma once
+// A parallel Delaunay refiner on pdt's public API only: pdt::Engine carries
+// out every change, the refiner decides. Its rules (in the spirit of the
+// paper's HQR):
+//   - a tetrahedron is bad if its circumcentre lies inside the domain and its
+//     circumradius exceeds `size` or its radius-edge ratio exceeds `ratio`;
+//     a bad tetrahedron gets its circumcentre inserted;
+//   - the domain's surface is protected by samples (domain.hpp), spaced about
+//     `size` apart, each with a snap radius (snap_radius: a quarter of the
+//     spacing) and a protecting radius (protect_radius: three quarters of
+//     it). A circumcentre within a sample's snap radius is never inserted:
+//     the sample is, instead, if it is not in yet (then the cell is judged
+//     again); otherwise the cell is left, in the protected layer along the
+//     surface. A circumsphere that holds a sample not in yet gets that sample
+//     instead of its circumcentre. When the interior asks for nothing more,
+//     the samples not inserted yet all go in, and refinement resumes. When a
+//     sample is inserted, the vertices (not samples) inside its protecting
+//     ball are removed. So the stream mixes insertions and removals, as the
+//     paper's §4.2 trace does. The bounds hold for every tetrahedron whose
+//     circumcentre is inside the domain and outside the protected layer;
+//   - it terminates: the size bound and ratio >= 2 (Shewchuk's bound) keep
+//     insertion radii from shrinking, and a point budget stops it anyway (and
+//     is reported when hit).
+// How it runs: the engine's change hook (on the workers, inside each
+// operation) judges every cell an operation creates, queues the bad ones and
+// notes every cell's incarnation (created and destroyed cells are reported),
+// so a queued cell that has died since is recognised and skipped. Refiner
+// coroutines, on the engine's arena, take cells from the queue and co_await
+// the insertions; the hook submits the removals. Nothing else touches the
+// triangulation.
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "pdt/pdt.hpp"
+#include "refine/domain.hpp"
+
+namespace pdt_refine {
+
+struct RefineOptions {
+  Domain domain;
+  double size = 0.1;        // the circumradius bound
+  double ratio = 2;         // the radius-edge bound (at least min_ratio)
+  unsigned workers = 1;     // the engine's workers (and the arena's threads, at most the cores)
+  std::uint64_t seed = 1;   // which surface samples are kept
+  std::uint64_t budget = 20000000;  // most points inserted
+  std::string trace;        // an .ops file to write the operations carried out to ("" = none)
+  // Called now and then (from the calling thread) while it runs.
+  std::function<void(std::uint64_t vertices, std::uint64_t queued, double seconds)> progress;
+};
+
+inline constexpr double min_ratio = 2;
+inline double snap_radius(double size) { return 0.25 * size; }
+inline double protect_radius(double size) { return 0.75 * size; }
+
+struct RefineStats {
+  std::uint64_t insertions = 0;   // circumcentres + samples + the box's corners
+  std::uint64_t circumcentres = 0, samples = 0, removals = 0;
+  std::uint64_t dead_skipped = 0;  // queued cells found dead when their turn came
+  std::uint64_t protected_skipped = 0;  // bad cells left in the protected layer
+  std::uint64_t surface_samples = 0;  // samples available
+  bool budget_hit = false;
+  double seconds = 0;
+  pdt::EngineStats engine;
+  unsigned workers = 0;
+};
+
+// Refines the empty triangulation t over o.domain. Throws pdt::Error
+// (invalid_argument) for size <= 0, a ratio below min_ratio, no workers.
+RefineStats refine(pdt::Triangulation& t, const RefineOptions& o);
+
+// What a refined mesh looks like, judged independently of the refiner.
+struct MeshQuality {
+  std::uint64_t inside = 0;        // tetrahedra whose centroid is inside the domain
+  std::uint64_t judged = 0;        // tetrahedra whose circumcentre is inside and not in the protected layer
+  std::uint64_t protected_layer = 0;  // tetrahedra whose circumcentre is inside, in a sample's snap radius
+  std::uint64_t violations = 0;    // of those, how many miss a bound
+  double worst_ratio = 0;          // largest radius-edge ratio among the judged
+  double largest_radius = 0;       // largest circumradius among the judged
+  double min_dihedral = 180;       // smallest dihedral angle among the inside, degrees
+};
+// The samples are those refine() used (the same size and seed).
+MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed);
+
+}  // namespace pdt_refine

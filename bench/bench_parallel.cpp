@@ -4,7 +4,7 @@
 //
 //   bench_parallel [--points N] [--threads 1,2,4,8,16] [--dists uniform,normal,line]
 //                  [--remove-fraction F] [--extreme] [--interleaved] [--skip-cgal-parallel]
-//                  [--seed S] [--csv FILE] [--timeout S]
+//                  [--skewed [--trace FILE]] [--seed S] [--csv FILE] [--timeout S]
 //
 // Per distribution: N points from pdt::generate (random order).
 //  pdt      for each thread count T (1 always included: it is Speedup1's base):
@@ -35,6 +35,10 @@
 // --extreme     §3.3 / Table 1: 3,000 normal points, insert all then remove
 //               all, pdt with 1 and max(T) threads (median of 5 runs; CGAL
 //               sequential for reference).
+// --skewed      load balance: corner, kuzmin and front_x/y/z streams (removals
+//               interleaved, fraction 0.3) and --trace FILE (a refiner's
+//               trace), each replayed as one mixed phase, stealing on and
+//               off, against CGAL sequential's replay.
 // --interleaved a refiner-like stream: pdt::generate with
 //               RemovalOrder::interleaved and remove fraction 0.3, replayed
 //               as one mixed phase (pdt at each T, CGAL sequential replay).
@@ -62,6 +66,7 @@
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/generate.hpp"
+#include "pdt/ops.hpp"
 #include "pdt/triangulation.hpp"
 #include "support/sys_info.hpp"
 
@@ -82,6 +87,8 @@ struct Options {
   double remove_fraction = 0.1;
   bool extreme = false;
   bool interleaved = false;
+  bool skewed = false;
+  std::string trace;  // a refiner's trace (pdt refine --trace), replayed with the skewed streams
   bool cgal_parallel = true;
   std::uint64_t seed = 1;
   std::string csv;
@@ -94,12 +101,15 @@ Options parse(int argc, char** argv) {
   ArgParser args(argv[0], "The paper's Tables 1-4 for pdt::Engine, against CGAL sequential and CGAL parallel");
   args.count("--points", "points per distribution (default 2000000)", o.points, 1);
   args.counts("--threads", "comma-separated thread counts (default 1,2,4,8,16; 1 is always run)", o.threads, 1, 4096);
-  args.list("--dists", "comma-separated distributions (default uniform,normal,line)", o.dists);
+  args.list("--dists", "comma-separated distributions (default uniform,normal,line; none: no main table)", o.dists);
   args.real("--remove-fraction", "fraction of the insertions undone after all of them, first inserted first "
             "(default 0.1)", o.remove_fraction, 0, 1);
   args.flag("--extreme", "also §3.3 (Table 1): 3,000 normal points, insert then remove all, 1 and max threads",
             o.extreme);
   args.flag("--interleaved", "also a refiner-like stream (RemovalOrder::interleaved, fraction 0.3)", o.interleaved);
+  args.flag("--skewed", "also the load-balance table (issue 11): corner, kuzmin, front_x/y/z streams with removals "
+            "interleaved (fraction 0.3), stealing on and off", o.skewed);
+  args.text("--trace", "with --skewed: also replay this operation stream (e.g. pdt refine --trace)", o.trace);
   args.flag("--skip-cgal-parallel", "do not run CGAL's Parallel_tag triangulation", skip_cgal_parallel);
   args.count("--seed", "generator seed (default 1)", o.seed);
   args.text("--csv", "also write every measurement as a CSV row to this file", o.csv);
@@ -137,6 +147,8 @@ struct Phase {
   std::uint64_t global_ops = 0;
   unsigned busy_workers = 0;  // workers that completed at least one operation
   std::uint64_t errors = 0;   // operations whose OpResult carried an error
+  std::uint64_t steals = 0;   // blocks served away from their home worker
+  double imbalance = 1;       // max / mean operations completed per worker in this phase
 };
 
 // Counts the operations that fail (OpResult::error): the only callback the
@@ -185,6 +197,15 @@ Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double
     p.deferred += w1.deferred - w0.deferred;
   }
   p.global_ops = b.global_operations - a.global_operations;
+  double sum = 0, most = 0;
+  for (std::size_t i = 0; i < b.workers.size(); ++i) {
+    const pdt::WorkerStats w0 = i < a.workers.size() ? a.workers[i] : pdt::WorkerStats{};
+    const double completed = double(b.workers[i].completed - w0.completed);
+    sum += completed;
+    most = std::max(most, completed);
+    p.steals += b.workers[i].steals - w0.steals;
+  }
+  p.imbalance = sum > 0 ? most / (sum / double(b.workers.size())) : 1;
   return p;
 }
 
@@ -202,7 +223,7 @@ struct Result {
 // `threads` workers in a tbb::task_arena(threads), then records the blocks,
 // the first failed operation and the final shape in r.
 template <class Body>
-Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body&& body) {
+Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body&& body, bool stealing = true) {
   Result r;
   r.impl = impl;
   r.threads = threads;
@@ -214,6 +235,7 @@ Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body
       ErrorSink errors;  // outlives the engine, whose callbacks use it
       pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
       opts.workers = threads;
+      opts.stealing = stealing;
       pdt::Engine e(t, box, opts);
       r.blocks = e.blocks_per_axis();
       body(t, e, errors, r);
@@ -267,8 +289,9 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
 }
 
 // pdt: a mixed stream (insertions and remove_insertion) replayed as one phase.
-Result run_pdt_stream(const pdt::OpStream& s, unsigned threads) {
-  return with_engine("pdt", *s.box, threads, [&](pdt::Triangulation&, pdt::Engine& e, ErrorSink& errors, Result& r) {
+Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, bool stealing = true) {
+  return with_engine(stealing ? "pdt" : "pdt_nosteal", *s.box, threads,
+                     [&](pdt::Triangulation&, pdt::Engine& e, ErrorSink& errors, Result& r) {
     const pdt::EngineStats s0 = e.stats();
     Stopwatch sw;
     for (const pdt::Operation& op : s.ops) {
@@ -280,7 +303,7 @@ Result run_pdt_stream(const pdt::OpStream& s, unsigned threads) {
     e.drain();
     r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
     r.mixed.errors = errors.count.load();
-  });
+  }, stealing);
 }
 
 // CGAL's runs in the Result form the tables and the CSV take.
@@ -310,13 +333,13 @@ struct Csv {
     on = true;
     f << "experiment,dist,points,impl,phase,threads,blocks_per_axis,ops,seconds,speedup1,speedup2,"
          "cgal_par_over_pdt,max_rollbacks_per_completed_pct,rollbacks,sleeps,seconds_asleep,deferred,"
-         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells\n";
+         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance\n";
   }
   // base1: pdt's 1-thread time of the phase; cgal: CGAL seq time; par: CGAL par time at this T (0: none).
   void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
            const char* phase_name, const Phase& p, double base1, double cgal, double par) {
     if (!on || !p.ran) return;
-    const bool is_pdt = r.impl == "pdt" || r.impl == "pdt_batch";
+    const bool is_pdt = r.impl.rfind("pdt", 0) == 0;
     char buf[1024];
     auto ratio = [&](double num, double den) -> std::string {
       if (num <= 0 || den <= 0) return "";
@@ -343,7 +366,9 @@ struct Csv {
     }
     if (is_pdt && &p == &r.ins)
       f << r.bytes_per_tet;
-    f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << "\n";
+    f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << ",";
+    if (is_pdt) f << p.steals << "," << p.imbalance;
+    f << "\n";
     f.flush();
   }
 };
@@ -636,13 +661,87 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   return bad;
 }
 
+// Load balance (issue 11): streams whose work concentrates (corner, kuzmin)
+// or moves (front_x/y/z), or a refiner's trace, replayed as one mixed phase
+// with stealing on and off.
+int skewed_table(const Options& o, const std::string& name, const pdt::OpStream& s, Csv& csv) {
+  progress("[%s] CGAL sequential...\n", name.c_str());
+  const Result seq = [&] {
+    Guard g(name + ": CGAL sequential", config_timeout);
+    return from_cgal("cgal_seq", 1, cgal_sequential_stream(s), s.insert_count(), s.remove_count(), true);
+  }();
+  std::vector<Result> on, off;
+  for (unsigned t : o.threads) {
+    for (bool stealing : {true, false}) {
+      progress("[%s] pdt, %u thread(s), stealing %s...\n", name.c_str(), t, stealing ? "on" : "off");
+      Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
+      (stealing ? on : off).push_back(run_pdt_stream(s, t, stealing));
+    }
+  }
+  std::printf("\n== skewed %s: %zu insertions and %zu removals, one mixed phase ==\n", name.c_str(),
+              s.insert_count(), s.remove_count());
+  Table tab({"Stealing on", "Stealing off"}, o.threads);
+  auto of = [&](int g, std::size_t i) -> const Result& { return g == 0 ? on[i] : off[i]; };
+  tab.row("Time (s)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds); });
+  tab.row("Speedup1 (pdt 1 worker / pdt)",
+          [&](int g, std::size_t i) { return fmt_ratio(of(g, 0).mixed.seconds, of(g, i).mixed.seconds); });
+  tab.row("Imbalance (max/mean completed)", [&](int g, std::size_t i) { return fmt("%.2f", of(g, i).mixed.imbalance); });
+  tab.row("Steals", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.steals); });
+  tab.row("Workers with work", [&](int g, std::size_t i) {
+    return fmt_u(of(g, i).mixed.busy_workers) + "/" + fmt_u(of(g, i).threads);
+  });
+  tab.row("Rollbacks (total)", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.rollbacks); });
+  tab.row("Max #Rollbacks/#compl.ops (%)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.max_rb_pct); });
+  tab.row("Seconds asleep (total)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds_asleep); });
+  tab.row("Global operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.global_ops); });
+  tab.row("Failed operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.errors); });
+  tab.row("CGAL seq time (s)", [&](int, std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });
+  tab.row("Speedup2 (CGAL seq / pdt)",
+          [&](int g, std::size_t i) { return fmt_ratio(seq.mixed.seconds, of(g, i).mixed.seconds); });
+  tab.print();
+  int bad = 0;
+  for (const auto* rs : {&on, &off})
+    for (const auto& r : *rs)
+      bad += !check(r.impl.c_str(), r.threads, r.shape, seq.shape, false) + !check_errors("pdt skewed", r);
+  std::printf("  final finite cells %zu, vertices %zu (CGAL seq); check: %s\n", seq.shape.finite_cells,
+              seq.shape.vertices, bad ? "MISMATCH (see above)" : "pdt matches at every worker count, stealing on and off");
+  for (std::size_t i = 0; i < on.size(); ++i) {
+    csv.row("skewed", name, s.insert_count(), on[i], "mixed", on[i].mixed, on[0].mixed.seconds, seq.mixed.seconds, 0);
+    csv.row("skewed", name, s.insert_count(), off[i], "mixed", off[i].mixed, off[0].mixed.seconds, seq.mixed.seconds,
+            0);
+  }
+  csv.row("skewed", name, s.insert_count(), seq, "mixed", seq.mixed, 0, 0, 0);
+  return bad;
+}
+
+int skewed_tables(const Options& o, Csv& csv) {
+  int bad = 0;
+  for (pdt::Distribution d : {pdt::Distribution::corner, pdt::Distribution::kuzmin, pdt::Distribution::front_x,
+                              pdt::Distribution::front_y, pdt::Distribution::front_z}) {
+    pdt::GenerateOptions g;
+    g.dist = d;
+    g.points = o.points;
+    g.seed = o.seed;
+    g.remove_fraction = interleaved_fraction;
+    g.removal_order = pdt::RemovalOrder::interleaved;
+    bad += skewed_table(o, pdt::to_string(d), pdt::generate(g), csv);
+  }
+  if (!o.trace.empty()) {
+    const pdt::OpStream s = pdt::read_ops(o.trace);
+    if (!s.box) throw pdt::Error(pdt::ErrorCode::invalid_argument, o.trace + ": the trace declares no box");
+    bad += skewed_table(o, "trace", s, csv);
+  }
+  return bad;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const Options o = parse(argc, argv);
   std::vector<pdt::Distribution> dists;
   try {
-    for (const auto& d : o.dists) dists.push_back(pdt::parse_distribution(d));
+    for (const auto& d : o.dists)
+      if (d != "none") dists.push_back(pdt::parse_distribution(d));
   } catch (const pdt::Error& e) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
@@ -683,6 +782,7 @@ int main(int argc, char** argv) {
     for (pdt::Distribution d : dists) mismatches += main_table(o, d, csv);
     if (o.interleaved)
       for (pdt::Distribution d : dists) mismatches += interleaved_table(o, d, csv);
+    if (o.skewed) mismatches += skewed_tables(o, csv);
     // Last: the case most likely to expose an engine livelock (see --timeout).
     if (o.extreme) mismatches += extreme_table(o, csv);
   } catch (const std::exception& e) {

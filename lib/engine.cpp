@@ -139,7 +139,11 @@ OpRecord* EngineState::make_remove(VertexHandle v) {
 void EngineState::submit(OpRecord* op) {
   // An operation whose place is unknown yet goes to a block picked by its
   // vertex id; the worker that pops it moves it on (engine_execute.cpp).
-  const std::uint32_t b = op->routed ? partition.block_of(op->point) : op->vertex % partition.blocks();
+  // (An undo of a pending insertion has no vertex yet: its ticket spreads
+  // such undos over the blocks instead of piling them into one.)
+  const std::uint32_t b =
+      op->routed ? partition.block_of(op->point)
+                 : static_cast<std::uint32_t>((op->vertex != no_vertex ? op->vertex : op->ticket) % partition.blocks());
   Block& block = blocks[b];
   block.submitted.fetch_add(1, std::memory_order_relaxed);
   enqueue(block, op);
@@ -157,10 +161,13 @@ void EngineState::submit_undo(std::uint64_t t, const TicketView& view, Engine::C
     // now, the worker that pops it reads it.
     op->vertex = view.vertex;
     op->stamp = view.stamp;
-    op->routed = false;
+  } else {
+    // A pending insertion: any block will do (picked by the ticket), the
+    // undo parks on its ticket and the insertion's completion routes it to
+    // the vertex.
+    op->vertex = no_vertex;
   }
-  // A pending insertion: any block will do, the undo parks on its ticket and
-  // the insertion's completion routes it to the vertex.
+  op->routed = false;
   submit(op);
 }
 

@@ -133,6 +133,13 @@ WorkerCoroutine EngineState::body(Worker& w) {
       }
     }
     release(*b);
+    // Work left behind while workers idle: let one take it (or another block
+    // this worker then claims first). Without this, a worker that went idle
+    // once every busy block was held would wait for the next submission,
+    // which may never come when the stream is all submitted.
+    if (opts.stealing && b->queued.load(std::memory_order_relaxed) != 0 &&
+        idle_count.load(std::memory_order_relaxed) > 0)
+      wake_idle();
     if (sleep) co_await SleepAwait{{this, &w}};
   }
 }

@@ -166,6 +166,38 @@ void gen_line(Rng& rng, std::uint64_t n, std::vector<Point3>& pts) {
   }
 }
 
+void gen_corner(Rng& rng, std::uint64_t n, std::vector<Point3>& pts) {
+  gen_uniform(rng, n, pts);
+  for (Point3& p : pts) p = {0.45 * p.x, 0.45 * p.y, 0.45 * p.z};
+}
+
+void gen_kuzmin(Rng& rng, std::uint64_t n, std::vector<Point3>& pts) {
+  constexpr double a = 0.05;
+  while (pts.size() < n) {
+    const double u = rng.uniform01();
+    if (u >= 1) continue;
+    const double w = 1 / (1 - u);
+    const double r = a * std::sqrt(w * w - 1);
+    double dx, dy, dz, q;  // a uniform direction: a point of the unit ball, normalised
+    do {
+      dx = 2 * rng.uniform01() - 1;
+      dy = 2 * rng.uniform01() - 1;
+      dz = 2 * rng.uniform01() - 1;
+      q = dx * dx + dy * dy + dz * dz;
+    } while (q > 1 || q < 1e-12);
+    const double f = r / std::sqrt(q);
+    const Point3 p{0.5 + f * dx, 0.5 + f * dy, 0.5 + f * dz};
+    if (p.x >= 0 && p.x <= 1 && p.y >= 0 && p.y <= 1 && p.z >= 0 && p.z <= 1) pts.push_back(p);
+  }
+}
+
+// Uniform points in increasing order of one coordinate (ties keep their draw order).
+void gen_front(Rng& rng, std::uint64_t n, int axis, std::vector<Point3>& pts) {
+  gen_uniform(rng, n, pts);
+  auto key = [axis](const Point3& p) { return axis == 0 ? p.x : axis == 1 ? p.y : p.z; };
+  std::stable_sort(pts.begin(), pts.end(), [&](const Point3& a, const Point3& b) { return key(a) < key(b); });
+}
+
 // Shuffles the first `take` positions of v (partial Fisher-Yates): they become
 // a uniformly random ordered sample of v's elements.
 template <class T>
@@ -304,6 +336,11 @@ OpStream generate(const GenerateOptions& o) {
     case Distribution::line: gen_line(point_rng, n, pts); break;
     case Distribution::grid: box = gen_grid(point_rng, n, pts); break;
     case Distribution::sphere: box = gen_sphere(point_rng, n, pts); break;
+    case Distribution::corner: gen_corner(point_rng, n, pts); break;
+    case Distribution::kuzmin: gen_kuzmin(point_rng, n, pts); break;
+    case Distribution::front_x: gen_front(point_rng, n, 0, pts); break;
+    case Distribution::front_y: gen_front(point_rng, n, 1, pts); break;
+    case Distribution::front_z: gen_front(point_rng, n, 2, pts); break;
     default: throw Error(ErrorCode::invalid_argument, "generate: unknown distribution");
   }
 
@@ -357,10 +394,12 @@ OpStream generate(const GenerateOptions& o) {
 
 Distribution parse_distribution(const std::string& name) {
   for (Distribution d : {Distribution::uniform, Distribution::normal, Distribution::line, Distribution::grid,
-                         Distribution::sphere})
+                         Distribution::sphere, Distribution::corner, Distribution::kuzmin, Distribution::front_x,
+                         Distribution::front_y, Distribution::front_z})
     if (name == to_string(d)) return d;
-  throw Error(ErrorCode::invalid_argument,
-              "unknown distribution '" + name + "'; expected uniform, normal, line, grid or sphere");
+  throw Error(ErrorCode::invalid_argument, "unknown distribution '" + name +
+                                               "'; expected uniform, normal, line, grid, sphere, corner, kuzmin, "
+                                               "front_x, front_y or front_z");
 }
 
 const char* to_string(Distribution d) {
@@ -370,6 +409,11 @@ const char* to_string(Distribution d) {
     case Distribution::line: return "line";
     case Distribution::grid: return "grid";
     case Distribution::sphere: return "sphere";
+    case Distribution::corner: return "corner";
+    case Distribution::kuzmin: return "kuzmin";
+    case Distribution::front_x: return "front_x";
+    case Distribution::front_y: return "front_y";
+    case Distribution::front_z: return "front_z";
   }
   return "unknown";
 }

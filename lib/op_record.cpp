@@ -53,6 +53,7 @@ void OpRecordPool::release(OpRecord* op) {
   op->only_if_alive = false;
   op->rollbacks = 0;
   op->stamp = 0;
+  op->vertex = no_vertex;
   Shard& s = shards_[my_shard()];
   std::lock_guard lock(s.mutex);
   op->next.store(s.head, std::memory_order_relaxed);

@@ -1122,3 +1122,57 @@ TEST_CASE("engine: the triangulation is usable sequentially after the engine is 
   REQUIRE(t.dimension() == -1);
   require_valid(t);
 }
+
+TEST_CASE("engine: skewed streams give CGAL's triangulation with 1 to 16 workers, stealing on and off",
+          "[engine][balance][tsan]") {
+  // Work that concentrates (a corner, a Kuzmin cluster) or moves (fronts
+  // along each axis): blocks change hands between workers all the time.
+  const std::size_t n = scaled(4000, 500);
+  for (pdt::Distribution dist : {pdt::Distribution::corner, pdt::Distribution::kuzmin, pdt::Distribution::front_x,
+                                 pdt::Distribution::front_y, pdt::Distribution::front_z}) {
+    const pdt::OpStream s = generated(dist, n, 0.3, pdt::RemovalOrder::interleaved, 5);
+    REQUIRE(s.box.has_value());
+    pdt::Triangulation seq;
+    replay_sequential(seq, s);
+    for (unsigned threads : {1u, 2u, 3u, 8u, 16u}) {
+      for (bool stealing : {true, false}) {
+        INFO(pdt::to_string(dist) << ", " << n << " points, " << threads << " workers, stealing " << stealing);
+        pdt::EngineOptions o = options_with(threads);
+        o.stealing = stealing;
+        pdt::Triangulation t;
+        const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, 4);
+        require_stats(run, s.ops.size(), threads);
+        if (!stealing) {
+          for (const pdt::WorkerStats& w : run.stats.workers) REQUIRE(w.steals == 0);
+        }
+        require_result(t, s, &seq);
+      }
+    }
+  }
+}
+
+TEST_CASE("engine: the skewed generators put their points where they say", "[engine][balance]") {
+  pdt::GenerateOptions g;
+  g.points = 5000;
+  g.dist = pdt::Distribution::corner;
+  for (const pdt::Operation& op : pdt::generate(g).ops) {
+    REQUIRE(op.point.x <= 0.45);
+    REQUIRE(op.point.y <= 0.45);
+    REQUIRE(op.point.z <= 0.45);
+  }
+  g.dist = pdt::Distribution::kuzmin;
+  std::size_t near = 0;
+  for (const pdt::Operation& op : pdt::generate(g).ops) {
+    const double dx = op.point.x - 0.5, dy = op.point.y - 0.5, dz = op.point.z - 0.5;
+    near += dx * dx + dy * dy + dz * dz < 0.1 * 0.1;
+  }
+  CHECK(near > 5000 / 2);  // a cluster: most points within 0.1 of the centre
+  int axis = 0;
+  for (pdt::Distribution d : {pdt::Distribution::front_x, pdt::Distribution::front_y, pdt::Distribution::front_z}) {
+    g.dist = d;
+    const pdt::OpStream s = pdt::generate(g);
+    auto key = [axis](const pdt::Point3& p) { return axis == 0 ? p.x : axis == 1 ? p.y : p.z; };
+    for (std::size_t i = 1; i < s.ops.size(); ++i) REQUIRE(key(s.ops[i - 1].point) <= key(s.ops[i].point));
+    ++axis;
+  }
+}

@@ -17,6 +17,13 @@ enum class Distribution {
             // many cospherical and coplanar subsets; coordinates are small integers
   sphere,   // integer points exactly on a sphere x^2+y^2+z^2 = R^2 (R the smallest radius with
             // at least N of them), N of them in shuffled order: all cospherical
+  // Skewed streams (load balance): the work concentrates or moves.
+  corner,   // uniform in [0, 0.45]^3, a corner of the unit-cube domain
+  kuzmin,   // a Kuzmin-like cluster around the cube's centre: distance r = a sqrt((1-u)^-2 - 1),
+            // a = 0.05, u uniform, direction uniform; points outside [0,1]^3 redrawn
+  front_x,  // uniform in the unit cube, streamed in increasing x: a front sweeping the domain
+  front_y,  // the same, in increasing y
+  front_z,  // the same, in increasing z
 };
 
 // The first floor(F * N) insertions (F = remove_fraction) are undone:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // bench_parallel: the paper's §4.1 tables (Tables 2-4, and Table 1 of §3.3)
 // for pdt::Engine, against CGAL's sequential and CGAL's own parallel
 // Delaunay_triangulation_3, same points, same run.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Which queue should carry operations from the master to a worker?
 // Compares oneTBB's concurrent_queue (what lib/engine.cpp uses) with
 // Boost.Lockfree's queue on the engine's traffic pattern: one or more

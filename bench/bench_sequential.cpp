@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // bench_sequential: pdt's sequential insertion and removal against CGAL's
 // Delaunay_triangulation_3 (Epick, Fast_location), one point at a time, same
 // points, same order, same run.

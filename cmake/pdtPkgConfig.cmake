@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # pdt.pc for pkg-config users, installed into <libdir>/pkgconfig beside the CMake package.
 # Included from the top CMakeLists.txt inside if(PDT_INSTALL), after target pdt exists.
 #

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The README's example: a refiner's view of pdt. Built and run by the tests.
 #include <pdt/pdt.hpp>
 

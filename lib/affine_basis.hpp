@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // AffineBasis: affinely independent vertices picked greedily from a sequence:
 // the first vertex, the next one at another point, the next one off their

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // BlockQueue: the operations waiting in one block. An intrusive
 // multi-producer single-consumer queue (Vyukov's): pushing is one exchange and

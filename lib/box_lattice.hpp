@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // A box cut into res^3 equal cells: which cell holds a coordinate. The one
 // place pdt scales coordinates to a box (the jump grid's slots, the engine's

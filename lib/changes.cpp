@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Change reporting (changes.hpp): the cells an operation made and deleted,
 // handed to the hook while the operation still holds them; and cell handles.
 #include "fault_injection.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The contention manager of paper §3.3, per worker: it keeps the worker's
 // progress ratio u = completed / attempted over a window of attempts and, at

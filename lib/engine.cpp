@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt::Engine's public API: attaching, submission, drain, statistics. The
 // scheduler is in engine_scheduler.cpp, running an operation in
 // engine_execute.cpp; the rooms are listed in engine_state.hpp.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Running one operation on a worker: its kernel call under try-locks, what a
 // rollback, a parked undo, an escalation or a dimension change do, and
 // delivering its result.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // EngineOptions from the environment, the allocator's name, summed statistics.
 #include <algorithm>
 #include <cmath>

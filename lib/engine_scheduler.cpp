@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The engine's scheduler: worker coroutines run as oneTBB tasks, claiming
 // blocks (home first, then the nearest busy block elsewhere), their phases
 // (running, idle, sleeping, waiting for the stopped world) and wake-ups.

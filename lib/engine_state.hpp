@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The engine's state, by room:
 //   partition.hpp          blocks of the domain along a Morton curve, homes

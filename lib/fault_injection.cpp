@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // See fault_injection.hpp. Compiled into every build, empty unless
 // PDT_FAULT_INJECTION is defined.
 #include "fault_injection.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Allocation-failure injection, for the tests of exception safety only. In a
 // build with PDT_FAULT_INJECTION (the pdt_fault library the fault tests link),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // FlatIndex: the vertices of the lower-dimensional state by point, to find a
 // duplicate: open addressing on a hash of the point's bits, linear probing,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Dimension < 3: while the live points are coplanar there is no tetrahedron;
 // the vertices are kept in a list (with a point index for duplicates) until an
 // affinely independent 4th arrives and build_3d makes the first tetrahedron.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Synthetic operation streams (see include/pdt/generate.hpp).
 //
 // Reproducibility: the same options give the same stream, bit for bit, on every

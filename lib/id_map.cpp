@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "id_map.hpp"
 
 #include <algorithm>

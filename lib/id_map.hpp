@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // IdMap: uint64 -> uint32 open-addressing map, cleared in O(entries used).
 // Scratch for one operation: no allocation once warmed up.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Insertion (paper §2.1): Bowyer-Watson. Locate p, gather the conflict zone
 // (the cells whose perturbed circumsphere holds p), and replace it by the cone
 // from the new vertex over the zone's boundary.

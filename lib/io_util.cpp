@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Internal I/O helpers; see io_util.hpp for the contracts.
 #include "io_util.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Internal I/O helpers shared by the readers and writers (ops_io.cpp,
 // mesh_io.cpp, the tool): exact number parsing, a buffered line/byte reader

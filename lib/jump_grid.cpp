@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "jump_grid.hpp"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Jump-and-walk start (paper §2.1, Mücke et al.), structured: a uniform grid
 // over the live vertices' bounding box remembers, per slot, the last vertex

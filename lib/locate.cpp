@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Location (paper §2.1): where a walk starts (a hint, the jump grid, the
 // context's last vertex, random probes) and the visibility walk itself; and the
 // conflict test both insertion and validation use.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt::check_mesh: is a Mesh a Delaunay tetrahedralization of its points?
 //
 // Independent of the triangulation code on purpose (it is what tests and

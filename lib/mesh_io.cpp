@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Meshes: extraction from a triangulation, TetGen and VTK writers, TetGen
 // reader. (check_mesh is in mesh_check.cpp, the point readers in
 // point_readers.cpp.)

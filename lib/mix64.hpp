@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // A 64-bit mixer (splitmix64's finaliser): seeds and hashes.
 #include <cstdint>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // OpContext: everything one thread needs to run kernel operations: its pools,
 // its counters, the locks it holds and its scratch. The sequential

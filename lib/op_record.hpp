@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // OpRecord: one submitted operation while it waits in a queue, waits on a
 // ticket, or runs; and the pool that recycles records, so that submitting

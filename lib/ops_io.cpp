@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Reading and writing operation streams (.ops text, .opsb binary); the
 // formats are documented in include/pdt/ops.hpp.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Partition (paper §3.1, made finer for load balance): the domain box cut into
 // b^3 blocks, numbered along a Morton (Z-order) curve, so that a run of

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The checks and messages every entry point applies to user points and boxes,
 // written once: which coordinates pdt accepts, and how a point or a box is

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt::read_points: point sets from .xyz, .xyz.gz, .ply, .off, .node, .smesh.
 //
 // Every reader returns the points in file order, coordinates converted exactly

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Internal: the point-file readers behind pdt::read_points, and the TetGen
 // node reader that read_tetgen shares.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Storage and per-thread pools (paper §3.2): each context allocates cell and
 // vertex ids from its own free lists, refilled by chunks carved from the
 // shared StableArrays; its count changes are folded into the totals later.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Exact geometric predicates (CGAL's filtered Epick kernel) and the symbolic
 // perturbation that makes the Delaunay triangulation of any point set unique.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Removal (paper §2.2): the hole is the vertex's star; the link's vertices
 // are triangulated in a per-context "small" triangulation, whose cells inside
 // the hole are sewn in. The symbolic perturbation guarantees that the small

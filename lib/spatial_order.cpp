@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #ifndef CGAL_LINKED_WITH_TBB
 #define CGAL_LINKED_WITH_TBB 1  // CGAL's Parallel_tag sort; pdt links oneTBB
 #endif

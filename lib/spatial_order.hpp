@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The order in which a batch of points is inserted: CGAL's spatial sort
 // (Hilbert curve over a biased randomized insertion order, BRIO), so that

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // StableArray<T>: a growable array whose elements never move, in two builds
 // (CMake option PDT_ALLOCATOR), compared by the benchmarks:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The stopped world: what cannot run under vertex locks (a change of
 // dimension, an operation that escalated, the jump grid's regrowth) runs

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The records a triangulation is made of, and how they are encoded.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "tickets.hpp"
 
 #include <string>

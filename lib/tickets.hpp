@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Tickets: insertion t of an engine is ticket t. While it can still be used,
 // its slot records the insertion's state and, once it is done, the vertex

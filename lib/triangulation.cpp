@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt::Triangulation, the public face of the kernel: argument checking, then
 // the kernel's operations in the sequential context, and the queries.
 #include <string>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The data structure behind pdt::Triangulation, and the kernel's operations.
 // The rooms, in the order an operation flows through them:

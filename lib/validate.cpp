@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Triangulation::Impl::validate: the invariants I1..I6 of triangulation_impl.hpp.
 #include <sstream>
 #include <unordered_set>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Per-vertex try-locks (paper §3.2). One atomic word per vertex:
 //   0          free
 //   k > 0      held shared by k readers

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Builds oneTBB with -fsanitize=thread for the tsan preset, from Debian's own
 # source package (the same version as the installed libtbb-dev), and installs it
 # into build-tsan-deps/tbb-tsan. ThreadSanitizer cannot see the synchronisation

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Pre-release check of the vcpkg port, ports/pdt. Not part of CI: about 10 minutes on
 # 2 cores, plus 3-8 minutes the first time to build vcpkg itself.
 #

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # The README's first command: install dependencies, build the release preset, then
 # generate 1M points with 10% interleaved removals, replay them on all cores with
 # validation, and run the sequential benchmark.

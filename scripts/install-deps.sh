@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Installs pdt's build dependencies from Debian 12 packages. Idempotent: packages
 # already present are left alone, so it is cheap to run before every build.
 #   install-deps.sh            what building and testing need (python3-vtk9: the test

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # The README's test command (and CI's, through .ci/run): install the
 # dependencies, then build and pass the whole suite in both allocator builds,
 # pdt's chunked pool (release preset) and mimalloc. The mimalloc build skips

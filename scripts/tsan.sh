@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # ThreadSanitizer in one command: install the dependencies, build the
 # instrumented oneTBB (once; scripts/build-tsan-tbb.sh skips it when it is up
 # to date), then configure, build and test the tsan preset in build-tsan/.

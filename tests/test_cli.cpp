@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The `pdt` command-line tool, run as a separate process: exit codes, and
 // error messages naming file and line on stderr, for bad inputs and usage.
 #include <sys/wait.h>

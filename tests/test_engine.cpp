@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The parallel engine (pdt::Engine): many workers on one Triangulation give
 // exactly the sequential / CGAL result for any stream, thread count and
 // interleaving; the coroutine and callback APIs; errors at submission; the

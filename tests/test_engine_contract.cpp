@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The engine's contract with its clients (engine.hpp): engines in turn on one
 // triangulation, the refusals that protect an attached triangulation,
 // thread-safe queries, clients that misbehave (rethrowing coroutines,

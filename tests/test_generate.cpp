@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Synthetic streams: determinism (pinned values guard platform independence),
 // every point inside the stream's box, the shape of each distribution, exact
 // integer grids and spheres, and the removal schedules.

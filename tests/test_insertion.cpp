@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Insertion: pdt::Triangulation equals CGAL's Delaunay_triangulation_3 of the
 // same points, whatever the insertion order, on synthetic, degenerate and real
 // point sets; bad input is rejected without changing anything; locate(),

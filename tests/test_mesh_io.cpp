@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Point readers (every real data set, with the counts SOURCES.md gives, and
 // small hand-made files for each format and error), TetGen/VTK writers and
 // reader, and check_mesh accepting valid meshes and rejecting broken ones.

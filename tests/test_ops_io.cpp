@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Operation stream I/O: round trips (text and binary, bit-exact), every
 // malformed-stream case with its line, missing files, and write failures
 // (disk full via /dev/full and a file size limit) leaving nothing behind.

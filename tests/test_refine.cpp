@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `pdt refine`, judged from the outside: it is run as a process, and its
 // output is checked independently. The mesh (.node/.ele) must be the Delaunay
 // triangulation of its points (CGAL's); every tetrahedron whose circumcentre

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Removal: after any interleaving of insertions and removals pdt equals CGAL's
 // Delaunay triangulation of the surviving points; removal undoes insertion
 // exactly; dimensions drop and come back; bad ids are rejected without change.

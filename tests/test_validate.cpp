@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // validate(): true on good triangulations of every kind; false, with a
 // message, once the structure is deliberately corrupted through impl().
 #include <string>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The pdt tool's command-line plumbing, shared by its commands: options of
 // the form "--name value" or "--name=value", usage errors (exit 2 with the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt check: is a TetGen mesh a Delaunay tetrahedralization?
 #include <cstdio>
 #include <optional>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt gen: writes a synthetic operation stream.
 #include <cstdio>
 #include <optional>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt refine: meshes a domain with the parallel Delaunay refiner of
 // tools/refine (written on pdt's public API only), then reports the mesh.
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt run: replays an operation stream, read as it goes (so memory follows
 // the live mesh, not the stream's length), or triangulates a point file; on
 // the sequential kernel or the parallel engine; then prints a summary.

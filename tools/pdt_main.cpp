@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt: command-line tool to generate operation streams, replay them on a
 // triangulation, refine a mesh of a domain, and check meshes. Run `pdt --help`.
 // Each command lives in tools/cmd_<name>.cpp.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "common/bench_util.hpp"
 
 #include <malloc.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Shared by the benches: command-line options, the points of an experiment,
 // the machine's description, progress lines on stderr.

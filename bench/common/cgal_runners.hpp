@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // CGAL doing what pdt does, for the benches' comparisons: the same points, the
 // same operations, timed the same way.

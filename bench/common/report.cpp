@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "common/report.hpp"
 
 #include <cstdio>

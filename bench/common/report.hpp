@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The benches' output: tables with per-thread-count columns, number
 // formatting, and a CSV writer (one row per measurement) for plots.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // A configuration that never finishes (an engine that livelocks or loops) must
 // not eat a whole benchmark session: past its deadline the run prints HANG

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // What an operation made: handles that stay checkable, read-only views of
 // cells, and the change hook a refiner installs to learn, inside each

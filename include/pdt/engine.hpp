@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // pdt::Engine: many workers carrying out a live stream of insertions and
 // removals on one Triangulation (Foteinos & Chrisochoides, §3), in the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // pdt::EngineOptions: how an Engine splits its work. Every field is mirrored by
 // an environment variable, read by EngineOptions::from_environment().

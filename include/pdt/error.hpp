@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Every failure pdt reports is a pdt::Error. The operation that throws it has
 // changed nothing: the triangulation (or engine, or file) is as it was before

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Synthetic operation streams, as in the paper's §4.1 plus the degenerate cases.
 #include <cstdint>

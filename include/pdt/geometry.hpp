@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Points and boxes as the user gives them. Coordinates are IEEE doubles and
 // are used exactly: no rounding, scaling or snapping happens anywhere in pdt.

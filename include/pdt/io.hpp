@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Reading point sets and writing / reading meshes.
 #include <array>

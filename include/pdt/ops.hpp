@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Operation streams: the sequence of insertions and removals a refiner makes.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // pdt: dynamic, parallel 3D Delaunay triangulation. Umbrella header.
 #include "pdt/engine.hpp"

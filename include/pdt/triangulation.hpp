@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // pdt::Triangulation: a dynamic 3D Delaunay triangulation with exact, robust
 // insertion and removal.

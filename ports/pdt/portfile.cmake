@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # vcpkg port for pdt. To build a local checkout instead of a release (no hash to
 # update while developing):
 #   PDT_SOURCE_DIR=/path/to/pdt vcpkg install pdt --overlay-ports=/path/to/pdt/ports
@@ -41,9 +42,4 @@ vcpkg_fixup_pkgconfig()  # lib/pkgconfig/pdt.pc (and debug/): relocatable, check
 file(REMOVE_RECURSE "${CURRENT_PACKAGES_DIR}/debug/include" "${CURRENT_PACKAGES_DIR}/debug/share")
 
 file(INSTALL "${CMAKE_CURRENT_LIST_DIR}/usage" DESTINATION "${CURRENT_PACKAGES_DIR}/share/${PORT}")
-if(EXISTS "${SOURCE_PATH}/LICENSE")
-  vcpkg_install_copyright(FILE_LIST "${SOURCE_PATH}/LICENSE")
-else()
-  # No LICENSE in the tree yet: vcpkg requires a copyright file, so say so plainly.
-  file(WRITE "${CURRENT_PACKAGES_DIR}/share/${PORT}/copyright" "pdt: no license file has been published yet.\n")
-endif()
+vcpkg_install_copyright(FILE_LIST "${SOURCE_PATH}/LICENSE")  # MIT, with what the binaries contain

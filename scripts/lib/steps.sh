@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # Sourced by the project's scripts: run named steps, say how long each took,
 # and name the step that failed (with set -e a script would otherwise just stop).
 #   steps_init NAME   (NAME prefixes the failure line)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Test helpers: CGAL's Delaunay_triangulation_3 (Epick) as the reference that
 // pdt::Triangulation must equal tetrahedron for tetrahedron, and canonical

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Running streams on an Engine in the tests: sizes scaled for TSan, a
 // livelock watchdog, replaying a stream with the error sink, checking the

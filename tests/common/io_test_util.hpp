@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Helpers for the I/O, generator and CLI tests: a scratch directory removed at
 // the end of the test, whole-file read/write, and bit-exact double comparison.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Point sets the tests build from: generated distributions, the degenerate
 // integer lattice and exactly cospherical sets, bounding boxes.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Operation streams for the tests: generated ones, streams over given points
 // with removals interleaved or after, the points a stream leaves standing,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Running the `pdt` tool as a separate process from a test: exit status and
 // captured output.

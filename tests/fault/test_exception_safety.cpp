@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Exception safety (built against pdt_fault: libpdt with its allocation-
 // failure injection points armed; lib/fault_injection.hpp). An operation that
 // meets a failed allocation either completes or changes nothing: for every

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // pdt_fuzz: the differential fuzzer. Random cases, each a stream of
 // insertions (duplicates and degenerate points included) and removals, cut
 // into segments run one after the other on the same triangulation: each

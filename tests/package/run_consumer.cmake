@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # ctest driver for the package.* tests (cmake -P): install a pdt build into a scratch
 # prefix, then build and run tests/package/consumer against it twice, as a user would:
 # with find_package(pdt CONFIG), and with `pkg-config --cflags --libs pdt`.

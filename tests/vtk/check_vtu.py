@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 """Reads .vtu files that pdt wrote with VTK's own reader (python3-vtk9) and
 checks them against the TetGen mesh of the same run.
 

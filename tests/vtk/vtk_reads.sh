@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # The vtk.reads test: pdt writes .vtu files (binary zlib, ASCII, a refined
 # mesh with cell fields) and VTK's own reader must read them back as the
 # TetGen files of the same runs. Skipped (exit 77, with a message) when VTK's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "refine/domain.hpp"
 
 #include <algorithm>

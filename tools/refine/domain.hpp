@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The domains pdt refine meshes: implicit shapes, inside where f(p) < 0, and
 // the points that sample their boundary surface.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Tetrahedron measures a Delaunay refiner judges cells by, in doubles: the
 // circumcentre and circumradius, the radius-edge ratio, the dihedral angles.

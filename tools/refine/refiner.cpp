@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "refine/refiner.hpp"
 
 #include <oneapi/tbb/concurrent_queue.h>

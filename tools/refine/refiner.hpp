@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // A parallel Delaunay refiner on pdt's public API only: pdt::Engine carries
 // out every change, the refiner decides. Its rules (in the spirit of the

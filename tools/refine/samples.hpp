@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The surface samples of a refinement, indexed by a grid of cells: the
 // nearest one within a radius, whether a point is one, and the right to

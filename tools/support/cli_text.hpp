@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Tool support (not part of libpdt): reading numbers from the command line
 // and writing doubles so that they read back exactly. std::from_chars and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Tool support: see sys_info.hpp.
 #include "sys_info.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Tool support (not part of libpdt): process memory, timing and a terminal progress line for the tool
 // and the benchmarks. Linux-specific where it must be (/proc); elsewhere the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Uses only the installed public headers and pdt::pdt; exits nonzero on any mismatch.
 #include <pdt/pdt.hpp>
 

@@ -1,0 +1,132 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: MIT
+"""Draws the benches' CSV files (bench_parallel --csv) as PNG plots.
+
+  /usr/bin/python3 bench/plot_results.py bench/results/parallel-1M-16cores.csv   -> ...-16cores.png
+  /usr/bin/python3 bench/plot_results.py bench/results/skewed-300k-16cores.csv   -> ...-16cores.png
+
+A 'main' table gives one panel per distribution: speedup over pdt with 1 worker
+(insertions and removals, one operation at a time), CGAL parallel's speedup over
+its own 1-thread run, and the ideal line. A 'skewed' table gives one panel per
+stream: speedup with stealing on and off. Needs Debian's python3-matplotlib
+(scripts/install-deps.sh --extras). The PNG goes beside the CSV.
+"""
+import csv
+import sys
+from collections import defaultdict
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def load(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def seconds_by(rows, **match):
+    out = {}
+    for r in rows:
+        if all(r[k] == v for k, v in match.items()):
+            out[int(r["threads"])] = float(r["seconds"])
+    return dict(sorted(out.items()))
+
+
+def speedups(times):
+    if 1 not in times:
+        return [], []
+    base = times[1]
+    ts = list(times)
+    return ts, [base / times[t] for t in ts]
+
+
+def panel_axes(n):
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.9 * rows), squeeze=False)
+    return fig, [a for row in axes for a in row]
+
+
+def finish(ax, threads, title):
+    top = max(threads) if threads else 16
+    ax.plot([1, top], [1, top], color="0.7", linestyle=":", label="ideal")
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log", base=2)
+    ax.set_xticks(threads)
+    ax.set_xticklabels([str(t) for t in threads])
+    ax.set_xlabel("workers (threads)")
+    ax.set_ylabel("speedup over 1")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def plot_main(rows, out, machine):
+    dists = sorted({r["dist"] for r in rows if r["experiment"] == "main"}, key=["uniform", "normal", "line"].index)
+    fig, axes = panel_axes(len(dists))
+    for ax, d in zip(axes, dists):
+        threads = []
+        for impl, phase, style, label in [("pdt", "insert", "o-", "pdt insert"),
+                                          ("pdt", "remove", "s-", "pdt remove"),
+                                          ("pdt_batch", "insert", "^--", "pdt batch insert"),
+                                          ("cgal_par", "insert", "v-.", "CGAL parallel insert"),
+                                          ("cgal_par", "remove", "x-.", "CGAL parallel remove")]:
+            ts, sp = speedups(seconds_by(rows, experiment="main", dist=d, impl=impl, phase=phase))
+            if ts:
+                ax.plot(ts, sp, style, label=label)
+                threads = ts
+        points = next(r["points"] for r in rows if r["dist"] == d)
+        finish(ax, threads, f"{d}, {int(points):,} points")
+    for ax in axes[len(dists):]:
+        ax.axis("off")
+    fig.suptitle(f"bench_parallel: speedup over 1 worker ({machine})")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def plot_skewed(rows, out, machine):
+    streams = []
+    for r in rows:
+        if r["experiment"] == "skewed" and r["dist"] not in streams:
+            streams.append(r["dist"])
+    fig, axes = panel_axes(len(streams))
+    for ax, d in zip(axes, streams):
+        threads = []
+        for impl, style, label in [("pdt", "o-", "stealing on"), ("pdt_nosteal", "s--", "stealing off")]:
+            ts, sp = speedups(seconds_by(rows, experiment="skewed", dist=d, impl=impl, phase="mixed"))
+            if ts:
+                ax.plot(ts, sp, style, label=label)
+                threads = ts
+        finish(ax, threads, d)
+    for ax in axes[len(streams):]:
+        ax.axis("off")
+    fig.suptitle(f"bench_parallel --skewed: speedup over 1 worker ({machine})")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def main():
+    if len(sys.argv) < 2:
+        sys.exit(__doc__)
+    for path in sys.argv[1:]:
+        rows = load(path)
+        if not rows:
+            sys.exit(f"plot_results: {path} has no rows")
+        machine = "16 cores" if "16cores" in path else "2 cores" if "2cores" in path else path
+        out = path.rsplit(".", 1)[0] + ".png"
+        kinds = defaultdict(int)
+        for r in rows:
+            kinds[r["experiment"]] += 1
+        if kinds.get("skewed"):
+            plot_skewed(rows, out, machine)
+        elif kinds.get("main"):
+            plot_main(rows, out, machine)
+        else:
+            sys.exit(f"plot_results: {path}: no 'main' or 'skewed' rows")
+        print(f"plot_results: {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -46,4 +46,16 @@ void Triangulation::Impl::end_report(OpContext& ctx, OpKind kind, VertexId v, st
   (*ctx.hook)(changes);
 }
 
+void Triangulation::Impl::finish_change(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation) {
+  try {
+    end_report(ctx, kind, v, incarnation);
+  } catch (...) {
+    release_all(ctx);
+    end_op_counters(ctx);
+    throw;
+  }
+  release_all(ctx);
+  end_op_counters(ctx);
+}
+
 }  // namespace pdt

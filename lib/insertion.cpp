@@ -101,15 +101,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   // A start for contexts that know no vertex yet; refreshed rarely (shared line).
   if ((ctx.insertions_made & 63) == 1) recent_vertex.store(v, std::memory_order_relaxed);
   ++ctx.stats.insertions;
-  try {
-    end_report(ctx, OpKind::insert, v, out.stamp);
-  } catch (...) {
-    release_all(ctx);
-    end_op_counters(ctx);
-    throw;
-  }
-  release_all(ctx);
-  end_op_counters(ctx);
+  finish_change(ctx, OpKind::insert, v, out.stamp);
   out.result = {v, true, out.stamp};
   return OpStatus::done;
 }

@@ -11,6 +11,7 @@
 #include <array>
 #include <cstring>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <zlib.h>
@@ -58,49 +59,69 @@ Mesh extract_mesh(const Triangulation& t) {
   return m;
 }
 
-void write_tetgen(const std::string& path, const Mesh& mesh) {
-  check_indices(mesh, "write_tetgen");
-  const std::string base = tetgen_base(path);
+// Writes base.node and base.ele a line at a time: each_point(emit) calls
+// emit(p) for the points in their order, each_tet(emit) emit(a, b, c, d) with
+// 0-based point numbers. Both files complete before either is renamed, so a
+// failure leaves neither.
+//   .node: "<#points> <dimension> <#attributes> <boundary markers 0/1>", then
+//          "<index> x y z", 0-based (TetGen takes the numbering from the first index).
+//   .ele:  "<#tetrahedra> <nodes per tetrahedron> <#attributes>", then
+//          "<index> a b c d", positively oriented as given.
+namespace {
+template <class EachPoint, class EachTet>
+void write_tetgen_files(const std::string& base, std::size_t points, EachPoint each_point, std::size_t tets,
+                        EachTet each_tet) {
   detail::OutputFile node(base + ".node");
   detail::OutputFile ele(base + ".ele");
   std::string line;
   line.reserve(128);
-  // .node: "<#points> <dimension> <#attributes> <boundary markers 0/1>", then
-  // "<index> x y z", 0-based (TetGen takes the numbering from the first index).
-  detail::append_uint(line, mesh.points.size());
+  detail::append_uint(line, points);
   line += " 3 0 0\n";
   node.put(line);
-  for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+  std::uint64_t k = 0;
+  each_point([&](const Point3& p) {
     line.clear();
-    detail::append_uint(line, i);
-    for (double c : {mesh.points[i].x, mesh.points[i].y, mesh.points[i].z}) {
+    detail::append_uint(line, k++);
+    for (double c : {p.x, p.y, p.z}) {
       line += ' ';
       detail::append_double(line, c);
     }
     line += '\n';
     node.put(line);
-  }
-  // .ele: "<#tetrahedra> <nodes per tetrahedron> <#attributes>", then
-  // "<index> a b c d", positively oriented as given.
+  });
   line.clear();
-  detail::append_uint(line, mesh.tets.size());
+  detail::append_uint(line, tets);
   line += " 4 0\n";
   ele.put(line);
-  for (std::size_t i = 0; i < mesh.tets.size(); ++i) {
+  k = 0;
+  each_tet([&](std::uint32_t a, std::uint32_t b, std::uint32_t c, std::uint32_t d) {
     line.clear();
-    detail::append_uint(line, i);
-    for (std::uint32_t v : mesh.tets[i]) {
+    detail::append_uint(line, k++);
+    for (std::uint32_t v : {a, b, c, d}) {
       line += ' ';
       detail::append_uint(line, v);
     }
     line += '\n';
     ele.put(line);
-  }
-  // Both complete before either is renamed: a failure leaves neither file.
+  });
   node.finish();
   ele.finish();
   node.commit();
   ele.commit();
+}
+}  // namespace
+
+void write_tetgen(const std::string& path, const Mesh& mesh) {
+  check_indices(mesh, "write_tetgen");
+  write_tetgen_files(
+      tetgen_base(path), mesh.points.size(),
+      [&](auto emit) {
+        for (const Point3& p : mesh.points) emit(p);
+      },
+      mesh.tets.size(),
+      [&](auto emit) {
+        for (const auto& t : mesh.tets) emit(t[0], t[1], t[2], t[3]);
+      });
 }
 
 namespace {
@@ -139,27 +160,18 @@ std::string encode_appended(const void* data, std::size_t bytes, VtuEncoding enc
   return out;
 }
 
-void put_ascii_doubles(detail::OutputFile& out, const double* v, std::size_t n, std::size_t per_line) {
-  std::string s;
-  for (std::size_t i = 0; i < n; i += per_line) {
-    s = "         ";
-    for (std::size_t j = i; j < std::min(n, i + per_line); ++j) {
-      s += ' ';
-      detail::append_double(s, v[j]);
-    }
-    s += '\n';
-    out.put(s);
-  }
-}
-
+// Numbers as text, per_line to a line (VTK's ASCII form).
 template <class T>
-void put_ascii_ints(detail::OutputFile& out, const T* v, std::size_t n, std::size_t per_line) {
+void put_ascii(detail::OutputFile& out, const T* v, std::size_t n, std::size_t per_line) {
   std::string s;
   for (std::size_t i = 0; i < n; i += per_line) {
     s = "         ";
     for (std::size_t j = i; j < std::min(n, i + per_line); ++j) {
       s += ' ';
-      detail::append_uint(s, static_cast<std::uint64_t>(v[j]));
+      if constexpr (std::is_floating_point_v<T>)
+        detail::append_double(s, static_cast<double>(v[j]));
+      else
+        detail::append_uint(s, static_cast<std::uint64_t>(v[j]));
     }
     s += '\n';
     out.put(s);
@@ -227,11 +239,11 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, 
     if (encoding != VtuEncoding::ascii) return;
     const Array& a = arrays[k];
     if (std::string(a.type) == "Float64")
-      put_ascii_doubles(out, static_cast<const double*>(a.data), a.count, a.components == 3 ? 3 : 6);
+      put_ascii(out, static_cast<const double*>(a.data), a.count, a.components == 3 ? 3 : 6);
     else if (std::string(a.type) == "Int64")
-      put_ascii_ints(out, static_cast<const std::int64_t*>(a.data), a.count, k == 1 ? 4 : 8);
+      put_ascii(out, static_cast<const std::int64_t*>(a.data), a.count, k == 1 ? 4 : 8);
     else
-      put_ascii_ints(out, static_cast<const std::uint8_t*>(a.data), a.count, 32);
+      put_ascii(out, static_cast<const std::uint8_t*>(a.data), a.count, 32);
     out.put("        </DataArray>\n");
   };
 
@@ -270,49 +282,25 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, 
 }
 
 void write_tetgen(const std::string& path, const Triangulation& t) {
-  // Straight from the triangulation, a line at a time: no copy of the mesh.
-  const std::string base = tetgen_base(path);
-  detail::OutputFile node(base + ".node");
-  detail::OutputFile ele(base + ".ele");
+  // Straight from the triangulation: no copy of the mesh.
   std::vector<std::uint32_t> node_of(t.vertex_id_bound(), 0xFFFFFFFFu);
-  std::string line;
-  detail::append_uint(line, t.number_of_vertices());
-  line += " 3 0 0\n";
-  node.put(line);
-  std::uint32_t next = 0;
-  for (VertexId v = 1; v < t.vertex_id_bound(); ++v) {
-    if (!t.is_vertex(v)) continue;
-    node_of[v] = next;
-    const Point3 p = t.point(v);
-    line.clear();
-    detail::append_uint(line, next++);
-    for (double c : {p.x, p.y, p.z}) {
-      line += ' ';
-      detail::append_double(line, c);
-    }
-    line += '\n';
-    node.put(line);
-  }
-  line.clear();
-  detail::append_uint(line, t.number_of_finite_cells());
-  line += " 4 0\n";
-  ele.put(line);
-  std::uint64_t k = 0;
-  for (CellId c = 0; c < t.cell_id_bound(); ++c) {
-    if (!t.is_finite_cell(c)) continue;
-    line.clear();
-    detail::append_uint(line, k++);
-    for (int i = 0; i < 4; ++i) {
-      line += ' ';
-      detail::append_uint(line, node_of[t.cell_vertex(c, i)]);
-    }
-    line += '\n';
-    ele.put(line);
-  }
-  node.finish();
-  ele.finish();
-  node.commit();
-  ele.commit();
+  write_tetgen_files(
+      tetgen_base(path), t.number_of_vertices(),
+      [&](auto emit) {
+        std::uint32_t next = 0;
+        for (VertexId v = 1; v < t.vertex_id_bound(); ++v) {
+          if (!t.is_vertex(v)) continue;
+          node_of[v] = next++;
+          emit(t.point(v));
+        }
+      },
+      t.number_of_finite_cells(),
+      [&](auto emit) {
+        for (CellId c = 0; c < t.cell_id_bound(); ++c)
+          if (t.is_finite_cell(c))
+            emit(node_of[t.cell_vertex(c, 0)], node_of[t.cell_vertex(c, 1)], node_of[t.cell_vertex(c, 2)],
+                 node_of[t.cell_vertex(c, 3)]);
+      });
 }
 
 Mesh read_tetgen(const std::string& path) {

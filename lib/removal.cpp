@@ -75,15 +75,7 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
   }
   ++ctx.stats.removals;
   out = RemoveResult::removed;
-  try {
-    end_report(ctx, OpKind::remove, v, incarnation);
-  } catch (...) {
-    release_all(ctx);
-    end_op_counters(ctx);
-    throw;
-  }
-  release_all(ctx);
-  end_op_counters(ctx);
+  finish_change(ctx, OpKind::remove, v, incarnation);
   return OpStatus::done;
 }
 

@@ -192,6 +192,9 @@ struct Triangulation::Impl {
   }
   // After the changes, while their cells are held: calls the hook.
   void end_report(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation);
+  // The end of a change that completed: the hook (end_report), then the locks
+  // released and the counters folded, also when the hook throws (rethrown).
+  void finish_change(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation);
 
   // -- locks (vertex_locks.cpp; no-ops when !ctx.locking) -----------------------
   bool lock_shared(OpContext& ctx, VertexId v);

@@ -167,8 +167,9 @@ class Engine {
   // Drains (client errors not collected by a drain() are dropped: see
   // stats()), then detaches. Called from the engine's own callbacks or
   // coroutines it throws pdt::Error instead: the engine cannot destroy the
-  // work that is running it (it is then left running, detached from nothing,
-  // and leaked).
+  // work that is running it. It is then left running and leaked, still
+  // attached to t, whose workers may still read it: t must then be leaked
+  // too (never destroyed); it refuses every change from then on.
   ~Engine() noexcept(false);
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;

@@ -610,15 +610,20 @@ int extreme_table(const Options& o, Csv& csv) {
 }
 
 // A refiner-like stream: removals interleaved with the insertions.
-int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
-  const std::string name = pdt::to_string(dist);
+// o.points insertions of dist with interleaved_fraction of them undone, interleaved.
+pdt::OpStream interleaved_stream(const Options& o, pdt::Distribution dist) {
   pdt::GenerateOptions g;
   g.dist = dist;
   g.points = o.points;
   g.seed = o.seed;
   g.remove_fraction = interleaved_fraction;
   g.removal_order = pdt::RemovalOrder::interleaved;
-  const pdt::OpStream s = pdt::generate(g);
+  return pdt::generate(g);
+}
+
+int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
+  const std::string name = pdt::to_string(dist);
+  const pdt::OpStream s = interleaved_stream(o, dist);
 
   progress("[%s interleaved] CGAL sequential...\n", name.c_str());
   const Result seq = [&] {
@@ -718,15 +723,8 @@ int skewed_table(const Options& o, const std::string& name, const pdt::OpStream&
 int skewed_tables(const Options& o, Csv& csv) {
   int bad = 0;
   for (pdt::Distribution d : {pdt::Distribution::corner, pdt::Distribution::kuzmin, pdt::Distribution::front_x,
-                              pdt::Distribution::front_y, pdt::Distribution::front_z}) {
-    pdt::GenerateOptions g;
-    g.dist = d;
-    g.points = o.points;
-    g.seed = o.seed;
-    g.remove_fraction = interleaved_fraction;
-    g.removal_order = pdt::RemovalOrder::interleaved;
-    bad += skewed_table(o, pdt::to_string(d), pdt::generate(g), csv);
-  }
+                              pdt::Distribution::front_y, pdt::Distribution::front_z})
+    bad += skewed_table(o, pdt::to_string(d), interleaved_stream(o, d), csv);
   if (!o.trace.empty()) {
     const pdt::OpStream s = pdt::read_ops(o.trace);
     if (!s.box) throw pdt::Error(pdt::ErrorCode::invalid_argument, o.trace + ": the trace declares no box");

@@ -78,7 +78,7 @@ struct Outcome {
   bool ok = false;
   char error[256] = {};
   double seconds = 0;
-  std::uint64_t vertices = 0, tets_inside = 0, insertions = 0, removals = 0, rollbacks = 0, steals = 0;
+  std::uint64_t vertices = 0, tets_inside = 0, insertions = 0, removals = 0, rollbacks = 0;
   std::uint64_t judged = 0, violations = 0, finite_cells = 0;
   double worst_ratio = 0, largest_radius = 0, imbalance = 1;
   long peak_kib = 0;  // filled in by the parent
@@ -247,7 +247,6 @@ Outcome run_pdt(const Options& o, const pdt_refine::Domain& d, unsigned workers)
   out.insertions = st.insertions;
   out.removals = st.removals;
   out.rollbacks = st.engine.total().rollbacks;
-  out.steals = st.engine.total().steals;
   out.imbalance = st.engine.imbalance();
   const pdt_refine::MeshQuality q = pdt_refine::measure(t, d, o.size, o.ratio, o.seed);
   out.vertices = t.number_of_vertices();
@@ -351,11 +350,11 @@ int main(int argc, char** argv) {
     }
     const bool met = r.violations == 0;
     bad += !met;
-    std::printf("%-18s %9.3f %11s %12s %10s %10s %9s %9s %10s %9.2f %10.1f %11s\n", names[i].c_str(), r.seconds,
+    std::printf("%-18s %9.3f %11s %12s %10s %10s %9s %9s %10s %9s %10.1f %11s\n", names[i].c_str(), r.seconds,
                 i == 0 ? "1.00" : fmt_ratio(rows[0].seconds, r.seconds).c_str(), fmt_u(r.tets_inside).c_str(),
                 fmt_u(static_cast<std::uint64_t>(double(r.tets_inside) / r.seconds)).c_str(), fmt_u(r.vertices).c_str(),
                 fmt_u(r.insertions).c_str(), fmt_u(r.removals).c_str(), i == 0 ? "-" : fmt_u(r.rollbacks).c_str(),
-                r.imbalance, double(r.peak_kib) / 1024, met ? "met" : "MISSED");
+                i == 0 ? "-" : fmt("%.2f", r.imbalance).c_str(), double(r.peak_kib) / 1024, met ? "met" : "MISSED");
   }
   std::printf("\n'vs CGAL': CGAL's time / this one (above 1: faster than CGAL). 'bounds': every tetrahedron whose "
               "circumcentre is inside and outside the protected layer has circumradius <= size and radius-edge <= "

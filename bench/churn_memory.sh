@@ -20,7 +20,6 @@ stream="$dir/churn.opsb"
 echo "churn_memory: $points insertions, 90% undone (interleaved); machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
 echo "command: bench/churn_memory.sh $build $points $workers"
 "$pdt" gen --points "$points" --remove-fraction 0.9 --interleaved --out "$stream" >/dev/null
-field() { awk -v k="$1" 'index($0, k) == 1 {print $(NF > 2 ? 3 : 2)}' "$2"; }
 for mode in 0 "$workers"; do
   if [[ $mode == 0 ]]; then args=(); else args=(--threads "$mode"); fi
   "$pdt" run "$stream" "${args[@]}" --validate >"$dir/run-$mode.txt"

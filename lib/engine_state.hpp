@@ -14,7 +14,10 @@
 //
 // Phases of a worker (a C++20 coroutine run as oneTBB tasks):
 //   idle      found no block it may serve; suspended. A submission to its home
-//             (or, when it may steal, any busy block) resumes it as a new task.
+//             (or, when it may steal, any busy block) resumes it as a new task,
+//             and so does (when it may steal) a worker releasing a block that
+//             still holds work: with a stream already all submitted, no
+//             submission would come to wake it.
 //   running   claims a non-empty block, serves up to `batch` of its operations,
 //             releases it, claims the next; a rollback re-queues the operation
 //             at the back of its block.

@@ -38,8 +38,9 @@
 //               sequential for reference).
 // --skewed      load balance: corner, kuzmin and front_x/y/z streams (removals
 //               interleaved, fraction 0.3) and --trace FILE (a refiner's
-//               trace), each replayed as one mixed phase, stealing on and
-//               off, against CGAL sequential's replay.
+//               trace), each replayed as one mixed phase with stealing and
+//               recuts (the default), stealing only, and neither, against
+//               CGAL sequential's replay.
 // --interleaved a refiner-like stream: pdt::generate with
 //               RemovalOrder::interleaved and remove fraction 0.3, replayed
 //               as one mixed phase (pdt at each T, CGAL sequential replay).
@@ -109,7 +110,7 @@ Options parse(int argc, char** argv) {
             o.extreme);
   args.flag("--interleaved", "also a refiner-like stream (RemovalOrder::interleaved, fraction 0.3)", o.interleaved);
   args.flag("--skewed", "also the load-balance table (issue 11): corner, kuzmin, front_x/y/z streams with removals "
-            "interleaved (fraction 0.3), stealing on and off", o.skewed);
+            "interleaved (fraction 0.3); stealing + recuts, stealing only, neither", o.skewed);
   args.text("--trace", "with --skewed: also replay this operation stream (e.g. pdt refine --trace)", o.trace);
   args.flag("--skip-cgal-parallel", "do not run CGAL's Parallel_tag triangulation", skip_cgal_parallel);
   args.count("--seed", "generator seed (default 1)", o.seed);
@@ -149,6 +150,7 @@ struct Phase {
   unsigned busy_workers = 0;  // workers that completed at least one operation
   std::uint64_t errors = 0;   // operations whose OpResult carried an error
   std::uint64_t steals = 0;   // blocks served away from their home worker
+  std::uint64_t recuts = 0;   // times the engine re-cut its blocks to where the work is
   double imbalance = 1;       // max / mean operations completed per worker in this phase
 };
 
@@ -198,6 +200,7 @@ Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double
     p.deferred += w1.deferred - w0.deferred;
   }
   p.global_ops = b.global_operations - a.global_operations;
+  p.recuts = b.recuts - a.recuts;
   double sum = 0, most = 0;
   for (std::size_t i = 0; i < b.workers.size(); ++i) {
     const pdt::WorkerStats w0 = i < a.workers.size() ? a.workers[i] : pdt::WorkerStats{};
@@ -220,11 +223,16 @@ struct Result {
   std::string first_error;  // pdt: the first failed operation's message
 };
 
+// How the engine balances its load (issue 11): stealing and recuts (the
+// default), stealing only, or the paper's static partition.
+enum class Balance { recut, steal, none };
+
 // Runs body(t, engine, errors, r) on a fresh triangulation with an Engine of
 // `threads` workers in a tbb::task_arena(threads), then records the blocks,
 // the first failed operation and the final shape in r.
 template <class Body>
-Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body&& body, bool stealing = true) {
+Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body&& body,
+                   Balance balance = Balance::recut) {
   Result r;
   r.impl = impl;
   r.threads = threads;
@@ -236,7 +244,8 @@ Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body
       ErrorSink errors;  // outlives the engine, whose callbacks use it
       pdt::EngineOptions opts = pdt::EngineOptions::from_environment();
       opts.workers = threads;
-      opts.stealing = stealing;
+      if (balance != Balance::recut) opts.rebalance = false;
+      if (balance == Balance::none) opts.stealing = false;
       pdt::Engine e(t, box, opts);
       r.blocks = e.blocks_per_axis();
       body(t, e, errors, r);
@@ -290,8 +299,9 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
 }
 
 // pdt: a mixed stream (insertions and remove_insertion) replayed as one phase.
-Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, bool stealing = true) {
-  return with_engine(stealing ? "pdt" : "pdt_nosteal", *s.box, threads,
+Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, Balance balance = Balance::recut) {
+  return with_engine(balance == Balance::recut ? "pdt" : balance == Balance::steal ? "pdt_norecut" : "pdt_nosteal",
+                     *s.box, threads,
                      [&](pdt::Triangulation&, pdt::Engine& e, ErrorSink& errors, Result& r) {
     const pdt::EngineStats s0 = e.stats();
     Stopwatch sw;
@@ -304,7 +314,7 @@ Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, bool stealing = 
     e.drain();
     r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
     r.mixed.errors = errors.count.load();
-  }, stealing);
+  }, balance);
 }
 
 // CGAL's runs in the Result form the tables and the CSV take.
@@ -334,7 +344,7 @@ struct Csv {
     on = true;
     f << "experiment,dist,points,impl,phase,threads,blocks_per_axis,ops,seconds,speedup1,speedup2,"
          "cgal_par_over_pdt,max_rollbacks_per_completed_pct,rollbacks,sleeps,seconds_asleep,deferred,"
-         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance\n";
+         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance,recuts\n";
   }
   // base1: pdt's 1-thread time of the phase; cgal: CGAL seq time; par: CGAL par time at this T (0: none).
   void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
@@ -368,7 +378,7 @@ struct Csv {
     if (is_pdt && &p == &r.ins)
       f << r.bytes_per_tet;
     f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << ",";
-    if (is_pdt) f << p.steals << "," << p.imbalance;
+    if (is_pdt) f << p.steals << "," << p.imbalance << "," << p.recuts;
     f << "\n";
     f.flush();
   }
@@ -669,30 +679,33 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
 
 // Load balance (issue 11): streams whose work concentrates (corner, kuzmin)
 // or moves (front_x/y/z), or a refiner's trace, replayed as one mixed phase
-// with stealing on and off.
+// with stealing and recuts (the default), stealing only, and neither.
 int skewed_table(const Options& o, const std::string& name, const pdt::OpStream& s, Csv& csv) {
   progress("[%s] CGAL sequential...\n", name.c_str());
   const Result seq = [&] {
     Guard g(name + ": CGAL sequential", config_timeout);
     return from_cgal("cgal_seq", 1, cgal_sequential_stream(s), s.insert_count(), s.remove_count(), true);
   }();
-  std::vector<Result> on, off;
+  const Balance modes[3] = {Balance::recut, Balance::steal, Balance::none};
+  const char* mode_names[3] = {"stealing + recuts", "stealing only", "neither"};
+  std::vector<Result> runs[3];
   for (unsigned t : o.threads) {
-    for (bool stealing : {true, false}) {
-      progress("[%s] pdt, %u thread(s), stealing %s...\n", name.c_str(), t, stealing ? "on" : "off");
+    for (int m = 0; m < 3; ++m) {
+      progress("[%s] pdt, %u thread(s), %s...\n", name.c_str(), t, mode_names[m]);
       Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
-      (stealing ? on : off).push_back(run_pdt_stream(s, t, stealing));
+      runs[m].push_back(run_pdt_stream(s, t, modes[m]));
     }
   }
   std::printf("\n== skewed %s: %zu insertions and %zu removals, one mixed phase ==\n", name.c_str(),
               s.insert_count(), s.remove_count());
-  Table tab({"Stealing on", "Stealing off"}, o.threads);
-  auto of = [&](int g, std::size_t i) -> const Result& { return g == 0 ? on[i] : off[i]; };
+  Table tab({"Stealing + recuts (default)", "Stealing only", "Static (paper)"}, o.threads);
+  auto of = [&](int g, std::size_t i) -> const Result& { return runs[g][i]; };
   tab.row("Time (s)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds); });
   tab.row("Speedup1 (pdt 1 worker / pdt)",
           [&](int g, std::size_t i) { return fmt_ratio(of(g, 0).mixed.seconds, of(g, i).mixed.seconds); });
   tab.row("Imbalance (max/mean completed)", [&](int g, std::size_t i) { return fmt("%.2f", of(g, i).mixed.imbalance); });
   tab.row("Steals", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.steals); });
+  tab.row("Recuts", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.recuts); });
   tab.row("Workers with work", [&](int g, std::size_t i) {
     return fmt_u(of(g, i).mixed.busy_workers) + "/" + fmt_u(of(g, i).threads);
   });
@@ -706,16 +719,14 @@ int skewed_table(const Options& o, const std::string& name, const pdt::OpStream&
           [&](int g, std::size_t i) { return fmt_ratio(seq.mixed.seconds, of(g, i).mixed.seconds); });
   tab.print();
   int bad = 0;
-  for (const auto* rs : {&on, &off})
-    for (const auto& r : *rs)
+  for (const auto& rs : runs)
+    for (const auto& r : rs)
       bad += !check(r.impl.c_str(), r.threads, r.shape, seq.shape, false) + !check_errors("pdt skewed", r);
   std::printf("  final finite cells %zu, vertices %zu (CGAL seq); check: %s\n", seq.shape.finite_cells,
-              seq.shape.vertices, bad ? "MISMATCH (see above)" : "pdt matches at every worker count, stealing on and off");
-  for (std::size_t i = 0; i < on.size(); ++i) {
-    csv.row("skewed", name, s.insert_count(), on[i], "mixed", on[i].mixed, on[0].mixed.seconds, seq.mixed.seconds, 0);
-    csv.row("skewed", name, s.insert_count(), off[i], "mixed", off[i].mixed, off[0].mixed.seconds, seq.mixed.seconds,
-            0);
-  }
+              seq.shape.vertices, bad ? "MISMATCH (see above)" : "pdt matches at every worker count, in every mode");
+  for (std::size_t i = 0; i < o.threads.size(); ++i)
+    for (const auto& rs : runs)
+      csv.row("skewed", name, s.insert_count(), rs[i], "mixed", rs[i].mixed, rs[0].mixed.seconds, seq.mixed.seconds, 0);
   csv.row("skewed", name, s.insert_count(), seq, "mixed", seq.mixed, 0, 0, 0);
   return bad;
 }

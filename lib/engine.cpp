@@ -53,6 +53,7 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   // Everything that may fail comes first; the triangulation is touched last.
   for (std::uint32_t i = 0; i < partition.blocks(); ++i) blocks[i].home = partition.home_of(i);
   sleepers.reserve(nworkers);
+  recut_keys.reserve(std::size_t{partition.blocks()} * recut_sample_per_block);
   workers.reserve(nworkers);
   for (unsigned i = 0; i < nworkers; ++i) workers.push_back(std::make_unique<Worker>(i, impl.new_context_id(), opts));
   kernel_hook = [this](const Changes& c) {
@@ -137,7 +138,7 @@ OpRecord* EngineState::make_remove(VertexHandle v) {
   return op;
 }
 
-void EngineState::submit(OpRecord* op) {
+void EngineState::submit(OpRecord* op, std::uint32_t count) {
   // An operation whose place is unknown yet goes to a block picked by its
   // vertex id; the worker that pops it moves it on (engine_execute.cpp).
   // (An undo of a pending insertion has no vertex yet: its ticket spreads
@@ -146,7 +147,7 @@ void EngineState::submit(OpRecord* op) {
       op->routed ? partition.block_of(op->point)
                  : static_cast<std::uint32_t>((op->vertex != no_vertex ? op->vertex : op->ticket) % partition.blocks());
   Block& block = blocks[b];
-  block.submitted.fetch_add(1, std::memory_order_relaxed);
+  block.submitted.fetch_add(count, std::memory_order_relaxed);
   enqueue(block, op);
 }
 
@@ -401,37 +402,42 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
     throw Error(ErrorCode::invalid_argument,
                 "insert_batch: " + std::to_string(points.size()) + " points; vertex ids allow at most 2^32 - 2");
   if (points.empty()) return e.tickets.issued();
-  std::vector<std::uint32_t> order;
-  e.arena->execute([&] { order = detail::spatial_order(points, true); });
-  // Everything that may fail, before the first submission.
+  // Everything that may fail, before the first submission: the points in
+  // insertion order, copied (the caller's span may go), cut into runs of
+  // consecutive points in one block, one record each.
   auto shared = std::make_unique<detail::BatchCallback>();
+  e.arena->execute([&] { shared->index = detail::spatial_order(points, true); });
+  shared->points.resize(points.size());
+  for (std::size_t k = 0; k < points.size(); ++k) shared->points[k] = points[shared->index[k]];
   shared->fn = std::move(done);
   shared->remaining.store(points.size());
-  std::vector<OpRecord*> ops(points.size());
-  std::size_t made = 0;
+  const std::vector<Point3>& sorted = shared->points;
+  std::vector<OpRecord*> runs;
   try {
-    for (; made < points.size(); ++made) ops[made] = e.records.acquire();
+    for (std::size_t k = 0; k < sorted.size();) {
+      const std::uint32_t block = e.partition.block_of(sorted[k]);
+      std::size_t end = k + 1;
+      while (end < sorted.size() && end - k < EngineState::max_run && e.partition.block_of(sorted[end]) == block) ++end;
+      runs.push_back(nullptr);
+      OpRecord* op = runs.back() = e.records.acquire();
+      op->kind = OpKind::insert;
+      op->from_batch = true;
+      op->point = sorted[k];
+      op->run_next = static_cast<std::uint32_t>(k);
+      op->run_end = static_cast<std::uint32_t>(end);
+      k = end;
+    }
+    shared->first_ticket = e.tickets.issue(points.size());
   } catch (...) {
-    for (std::size_t i = 0; i < made; ++i) e.records.release(ops[i]);
+    for (OpRecord* op : runs)
+      if (op) e.records.release(op);
     throw;
   }
-  Ticket first = 0;
-  try {
-    first = e.tickets.issue(points.size());
-  } catch (...) {
-    for (OpRecord* op : ops) e.records.release(op);
-    throw;
-  }
+  const Ticket first = shared->first_ticket;
   detail::BatchCallback* batch_done = shared.release();  // the last operation frees it
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const std::uint32_t i = order[k];
-    OpRecord* op = ops[k];
-    op->kind = OpKind::insert;
-    op->point = points[i];
-    op->ticket = first + i;
-    op->from_batch = true;
+  for (OpRecord* op : runs) {
     op->batch_done = batch_done;
-    e.submit(op);
+    e.submit(op, op->run_end - op->run_next);
   }
   return first;
 }
@@ -541,6 +547,7 @@ EngineStats Engine::stats() const {
   }
   s.global_operations = e.global_ops.load();
   s.client_errors = e.client_errors.load();
+  s.recuts = e.recuts.load();
   return s;
 }
 

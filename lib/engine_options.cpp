@@ -43,6 +43,11 @@ EngineOptions EngineOptions::from_environment(EngineOptions o) {
     if (stealing > 1) throw Error(ErrorCode::invalid_argument, "PDT_STEALING must be 0 or 1");
     o.stealing = stealing == 1;
   }
+  unsigned rebalance = o.rebalance ? 1 : 0;
+  if (env_number("PDT_REBALANCE", rebalance)) {
+    if (rebalance > 1) throw Error(ErrorCode::invalid_argument, "PDT_REBALANCE must be 0 or 1");
+    o.rebalance = rebalance == 1;
+  }
   return o;
 }
 

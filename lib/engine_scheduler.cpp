@@ -111,14 +111,24 @@ WorkerCoroutine EngineState::body(Worker& w) {
     }
     Block* b = claim(w);
     if (!b) {
+      if (maybe_recut(w)) continue;
       co_await IdleAwait{{this, &w}};
       continue;
     }
     bool sleep = false;
+    OpRecord* run = nullptr;  // a run of an insert_batch in hand (not queued meanwhile)
     for (std::uint32_t served = 0; served < batch && !sleep; ++served) {
-      OpRecord* op = b->queue.pop();
-      if (!op) break;
-      b->queued.fetch_sub(1, std::memory_order_relaxed);
+      OpRecord* op = nullptr;
+      if (!run) {
+        op = b->queue.pop();
+        if (!op) break;
+        b->queued.fetch_sub(1, std::memory_order_relaxed);
+        if (op->run_end) run = op;
+      }
+      if (run) {
+        op = take_from_run(run);
+        if (!op) break;  // no record to be had now: the run waits in its block
+      }
       const Outcome outcome = execute(w, op);
       if (outcome == Outcome::rollback || outcome == Outcome::global) {
         b->queued.fetch_add(1, std::memory_order_relaxed);
@@ -133,6 +143,10 @@ WorkerCoroutine EngineState::body(Worker& w) {
         case Verdict::carry_on: break;
       }
     }
+    if (run) {  // what is left of it, back in its block
+      b->queued.fetch_add(1, std::memory_order_relaxed);
+      b->queue.push(run);
+    }
     release(*b);
     // Work left behind while workers idle: let one take it (or another block
     // this worker then claims first). Without this, a worker that went idle
@@ -143,6 +157,30 @@ WorkerCoroutine EngineState::body(Worker& w) {
       wake_idle();
     if (sleep) co_await SleepAwait{{this, &w}};
   }
+}
+
+OpRecord* EngineState::take_from_run(OpRecord*& run) {
+  OpRecord* one = nullptr;
+  try {
+    one = records.acquire();
+  } catch (const std::bad_alloc&) {
+    return nullptr;
+  }
+  assert(run->run_next < run->run_end);
+  const BatchCallback& batch = *run->batch_done;
+  const std::uint32_t k = run->run_next++;
+  one->kind = OpKind::insert;
+  one->from_batch = true;
+  one->point = batch.points[k];
+  one->ticket = batch.first_ticket + batch.index[k];
+  one->batch_done = run->batch_done;
+  if (run->run_next == run->run_end) {
+    records.release(run);
+    run = nullptr;
+  } else {
+    run->point = batch.points[run->run_next];
+  }
+  return one;
 }
 
 // ---------------------------------------------------------------------------
@@ -189,12 +227,20 @@ Block* EngineState::claim(Worker& w) {
   };
   // Now and then, orphans first, so a sleeper's blocks are not left waiting
   // behind a home that always has work.
-  if (opts.stealing && (++w.home_cursor & 3) == 0)
+  if (opts.stealing && (++w.claims & 3) == 0)
     if (Block* b = steal(true)) return b;
   const std::uint32_t n = end - first;
+  if (w.repeat >= max_repeat) {
+    w.home_cursor = n ? (w.home_cursor + 1) % n : 0;
+    w.repeat = 0;
+  }
   for (std::uint32_t k = 0; k < n; ++k) {
-    const std::uint32_t i = first + (w.home_cursor + k) % n;
-    if (Block* b = try_claim(i)) return b;
+    const std::uint32_t at = (w.home_cursor + k) % n;
+    if (Block* b = try_claim(first + at)) {
+      w.repeat = k == 0 ? w.repeat + 1 : 1;
+      w.home_cursor = at;
+      return b;
+    }
   }
   if (!opts.stealing) return nullptr;
   if (Block* b = steal(true)) return b;
@@ -210,6 +256,94 @@ bool EngineState::work_for(const Worker& w) const {
 void EngineState::release(Block& b) {
   assert(b.holder.load(std::memory_order_relaxed) >= 0);
   b.holder.store(-1, std::memory_order_release);
+}
+
+// ---------------------------------------------------------------------------
+// Rebalancing: re-cutting the blocks where the work is
+// ---------------------------------------------------------------------------
+std::uint64_t EngineState::completed_total() const {
+  std::uint64_t n = 0;
+  for (const auto& w : workers) n += w->completed.load(std::memory_order_relaxed);
+  return n;
+}
+
+bool EngineState::maybe_recut(Worker& w) {
+  if (!opts.stealing || !opts.rebalance || nworkers < 2 || world.stopped()) return false;
+  const std::uint32_t count = partition.blocks();
+  std::uint64_t queued = 0;
+  for (std::uint32_t i = 0; i < count; ++i) queued += blocks[i].queued.load(std::memory_order_relaxed);
+  // claim() found nothing, so this work is in blocks that others serve.
+  if (queued < recut_min_queued * nworkers || completed_total() < recut_after.load(std::memory_order_relaxed))
+    return false;
+  std::unique_lock<std::mutex> lock;
+  if (!world.try_stop(w.index, lock)) return false;
+  // Claim every block. A holder lets go within one operation (it finds the
+  // world stopped); one that does not within the deadline (a client callback
+  // that blocks) cancels this recut.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
+  std::uint32_t claimed = 0;
+  for (; claimed < count; ++claimed) {
+    bool got = false;
+    for (;;) {
+      int expect = -1;
+      got = blocks[claimed].holder.compare_exchange_weak(expect, static_cast<int>(w.index), std::memory_order_acq_rel);
+      if (got || std::chrono::steady_clock::now() > deadline) break;
+      std::this_thread::yield();
+    }
+    if (!got) break;
+  }
+  bool recut = false;
+  if (claimed == count) {
+    // Every queued operation out, chained in order through its (now free)
+    // queue link;
+    // a sample of the keys of those that know their place.
+    OpRecord* first = nullptr;
+    OpRecord* last = nullptr;
+    std::uint64_t stride = std::max<std::uint64_t>(1, queued / recut_keys.capacity());
+    std::uint64_t seen = 0;
+    recut_keys.clear();
+    for (std::uint32_t i = 0; i < count; ++i) {
+      Block& b = blocks[i];
+      while (OpRecord* op = b.queue.pop()) {
+        b.queued.fetch_sub(1, std::memory_order_relaxed);
+        if (op->routed && seen++ % stride == 0 && recut_keys.size() < recut_keys.capacity())
+          recut_keys.push_back(partition.key_of(op->point));  // within capacity: no allocation
+        op->next.store(nullptr, std::memory_order_relaxed);
+        if (last)
+          last->next.store(op, std::memory_order_relaxed);
+        else
+          first = op;
+        last = op;
+      }
+    }
+    if (!recut_keys.empty()) {
+      std::sort(recut_keys.begin(), recut_keys.end());
+      partition.recut(recut_keys);
+      recut = true;
+    }
+    // Back in, each to its block under the new cut, in their old order.
+    std::uint64_t moved_count = 0;
+    while (first) {
+      OpRecord* op = first;
+      first = op->next.load(std::memory_order_relaxed);
+      const std::uint32_t dest = op->routed ? partition.block_of(op->point)
+                                            : static_cast<std::uint32_t>(
+                                                  (op->vertex != no_vertex ? op->vertex : op->ticket) % count);
+      blocks[dest].queued.fetch_add(1, std::memory_order_relaxed);
+      blocks[dest].queue.push(op);
+      ++moved_count;
+    }
+    recut_after.store(completed_total() + moved_count / 2, std::memory_order_relaxed);
+    if (recut) recuts.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    recut_after.store(completed_total() + queued / 2, std::memory_order_relaxed);
+  }
+  for (std::uint32_t i = 0; i < claimed; ++i) blocks[i].holder.store(-1, std::memory_order_release);
+  world.restart(lock, [this](std::coroutine_handle<> h) { spawn(h); });
+  // The work is spread now: let the idle workers at it.
+  while (idle_count.load(std::memory_order_seq_cst) > 0 && wake_idle()) {
+  }
+  return recut;
 }
 
 // ---------------------------------------------------------------------------

@@ -20,12 +20,22 @@
 //             submission would come to wake it.
 //   running   claims a non-empty block, serves up to `batch` of its operations,
 //             releases it, claims the next; a rollback re-queues the operation
-//             at the back of its block.
+//             at the back of its block. A run of an insert_batch is served
+//             point after point while the worker holds the block, and what
+//             is left of it goes back to the block when the worker lets go. A running worker that finds no block
+//             to claim while much work waits in blocks others serve re-cuts
+//             the blocks (rebalance, below) before it goes idle.
 //   sleeping  suspended by the contention manager (progress ratio below u-);
 //             woken by a worker whose ratio is above u+, a worker going idle,
 //             a submission when nobody runs, or drain(). Its blocks may be
 //             served by others meanwhile (stealing), so a sleeper never holds
 //             work hostage.
+// Rebalancing (a recut): the worker stops the world, claims every block (a
+// holder lets go within one operation, which finds the world stopped), moves
+// every queued operation out, re-cuts the partition at quantiles of their
+// keys, puts each back in its new block and restarts the world. It runs only
+// when it can pay: at least `recut_min_queued` per worker wait, and the
+// workers completed since the last recut at least half what was queued then.
 // Invariants (checked in debug builds where they are local):
 //   - a block is served by at most one worker: Block::holder;
 //   - `active` counts running workers; a worker never sleeps when it is the
@@ -107,7 +117,14 @@ struct alignas(64) Worker {
   std::atomic<WorkerPhase> phase{WorkerPhase::idle};
   std::coroutine_handle<> handle;
   ContentionManager contention;  // owned by the worker's running task
-  std::uint32_t home_cursor = 0;  // next home block to look at (round robin)
+  // Home blocks are served in a sweep along the curve: the scan starts at the
+  // block served last (home_cursor, relative to the home's first block), so
+  // one worker keeps to one region, as a spatial sort would; after
+  // `max_repeat` claims of the same block in a row it starts one further, so
+  // a block that keeps receiving work cannot starve the others.
+  std::uint32_t home_cursor = 0;
+  std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
+  std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
   std::chrono::steady_clock::time_point slept_at;
   // Statistics: written by the worker, read by stats() (relaxed).
@@ -143,6 +160,12 @@ struct EngineState {
   std::atomic<int> active{0};
   std::atomic<int> idle_count{0};
   std::atomic<std::uint64_t> global_ops{0};
+  // Rebalancing: recuts done, and the completed count before which none runs.
+  std::atomic<std::uint64_t> recuts{0};
+  std::atomic<std::uint64_t> recut_after{0};
+  // The recutting worker's scratch (with the world stopped, by its stopper):
+  // a sample of the queued keys. Reserved once; a recut allocates nothing else.
+  std::vector<std::uint64_t> recut_keys;
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
@@ -155,11 +178,16 @@ struct EngineState {
   std::atomic<std::uint64_t> client_errors{0};
 
   static constexpr std::uint32_t batch = 64;  // operations served per block claim
+  static constexpr std::uint32_t max_repeat = 16;  // claims of one home block in a row
+  static constexpr std::uint32_t max_run = 256;    // points of an insert_batch run
+  static constexpr std::uint64_t recut_min_queued = 2 * batch;  // per worker, for a recut to pay
+  static constexpr std::size_t recut_sample_per_block = 32;      // keys sampled per block
 
   // -- submission (engine.cpp) ---------------------------------------------------
   OpRecord* make_insert(const Point3& p);
   OpRecord* make_remove(VertexHandle v);
-  void submit(OpRecord* op);
+  // Routes op to its block; it stands for `count` operations (a run: its points).
+  void submit(OpRecord* op, std::uint32_t count = 1);
   void submit_undo(std::uint64_t t, const TicketView& view, Engine::Callback done, BatchCallback* batch_done);
   void record_client_error(std::exception_ptr e);
 
@@ -179,6 +207,14 @@ struct EngineState {
   Block* claim(Worker& w);       // a non-empty block w may serve, claimed; or null
   bool work_for(const Worker& w) const;  // is there a block w may claim?
   void release(Block& b);
+  std::uint64_t completed_total() const;
+  // Worker w (holding no block, in no operation) found nothing to claim:
+  // re-cut the blocks if work piles up where others are. True if it did.
+  bool maybe_recut(Worker& w);
+  // The next point of a run (held by its worker, not queued) as a record of
+  // its own; the run is released after its last point. Null when no record
+  // can be had (out of memory): the run stays as it was.
+  OpRecord* take_from_run(OpRecord*& run);
   bool idle_everywhere() const;  // no operation pending
   std::uint64_t in_flight() const;
   WorkerCoroutine body(Worker& w);

@@ -13,10 +13,15 @@
 
 namespace pdt::detail {
 
-// One callback shared by the operations of a batch: freed by the last one.
+// What the operations of a batch share: one callback, and for insert_batch
+// the points themselves, in insertion (spatial) order. Freed by the last
+// operation to complete.
 struct BatchCallback {
   Engine::Callback fn;
   std::atomic<std::uint64_t> remaining{0};
+  std::vector<Point3> points;          // insert_batch: in insertion order
+  std::vector<std::uint32_t> index;    // points[k] is the caller's points[index[k]]: ticket first_ticket + index[k]
+  std::uint64_t first_ticket = 0;
 };
 
 struct OpRecord {
@@ -35,6 +40,12 @@ struct OpRecord {
   Engine::Callback done;
   BatchCallback* batch_done = nullptr;
   OpAwaitBase* awaiter = nullptr;
+  // A run of an insert_batch: its points [run_next, run_end) of
+  // batch_done->points, consecutive in insertion order and in one block,
+  // waiting as one record; a worker serves them one after the other, each as
+  // a record of its own (`point` is then the next one's, for routing).
+  // run_end == 0: not a run. Invariant: run_next < run_end while queued.
+  std::uint32_t run_next = 0, run_end = 0;
 };
 
 // Records come in slabs and are recycled through free lists, one per shard

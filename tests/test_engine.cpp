@@ -36,6 +36,7 @@
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
+#include "partition.hpp"           // the recut test reads the blocks' cut
 #include "triangulation_impl.hpp"  // the contention test holds a vertex lock itself
 
 using namespace pdt_test;
@@ -1150,6 +1151,70 @@ TEST_CASE("engine: skewed streams give CGAL's triangulation with 1 to 16 workers
       }
     }
   }
+}
+
+TEST_CASE("engine: a recut gives each block an equal share of the work, and routes by the cut",
+          "[engine][balance]") {
+  const pdt::Box box{{0, 0, 0}, {1, 1, 1}};
+  pdt::detail::Partition part(box, 6, 2);  // 216 blocks
+  REQUIRE(part.blocks() == 216);
+  // At the start: equal volumes, so uniform points spread evenly.
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<std::size_t> count(part.blocks());
+  for (int i = 0; i < 216000; ++i) ++count[part.block_of({u(rng), u(rng), u(rng)})];
+  for (std::size_t c : count) REQUIRE((c > 700 && c < 1300));
+  // A Kuzmin cluster crowds a few blocks; cut at its keys' quantiles, every
+  // block gets about the same share.
+  pdt::GenerateOptions g;
+  g.points = 50000;
+  g.dist = pdt::Distribution::kuzmin;
+  std::vector<pdt::Point3> pts;
+  for (const pdt::Operation& op : pdt::generate(g).ops) pts.push_back(op.point);
+  std::fill(count.begin(), count.end(), 0);
+  for (const pdt::Point3& p : pts) ++count[part.block_of(p)];
+  REQUIRE(*std::max_element(count.begin(), count.end()) > 2000);  // before: a hot block
+  std::vector<std::uint64_t> keys;
+  for (const pdt::Point3& p : pts) keys.push_back(part.key_of(p));
+  std::sort(keys.begin(), keys.end());
+  part.recut(keys);
+  std::fill(count.begin(), count.end(), 0);
+  for (const pdt::Point3& p : pts) {
+    const std::uint32_t b = part.block_of(p);
+    ++count[b];
+    REQUIRE(part.block_of_key(part.key_of(p)) == b);
+  }
+  const double fair = double(pts.size()) / part.blocks();
+  for (std::size_t c : count) REQUIRE(double(c) < 2 * fair);
+  // Keys out of the box, and the ends of the curve, still land in a block.
+  REQUIRE(part.block_of({-1e300, 2, 0.5}) < part.blocks());
+  REQUIRE(part.block_of_key(0) == 0);
+  REQUIRE(part.block_of_key(pdt::detail::Partition::key_end - 1) == part.blocks() - 1);
+}
+
+TEST_CASE("engine: recuts happen on a cluster and give CGAL's triangulation", "[engine][balance][tsan]") {
+  // A Kuzmin cluster submitted at once: the workers that run out of blocks
+  // find the work piled in the few blocks others serve, and re-cut.
+  const std::size_t n = scaled(20000, 4000);
+  const pdt::OpStream s = generated(pdt::Distribution::kuzmin, n, 0.3, pdt::RemovalOrder::interleaved, 9);
+  pdt::Triangulation seq;
+  replay_sequential(seq, s);
+  std::uint64_t recuts = 0;
+  for (int attempt = 0; attempt < 4 && recuts == 0; ++attempt) {
+    for (bool rebalance : {true, false}) {
+      INFO("attempt " << attempt << ", rebalance " << rebalance);
+      pdt::EngineOptions o = options_with(8);
+      o.blocks_per_axis = 4;
+      o.rebalance = rebalance;
+      pdt::Triangulation t;
+      const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, 4);
+      require_stats(run, s.ops.size(), 8);
+      if (!rebalance) REQUIRE(run.stats.recuts == 0);
+      if (rebalance) recuts += run.stats.recuts;
+      require_result(t, s, &seq);
+    }
+  }
+  CHECK(recuts > 0);
 }
 
 TEST_CASE("engine: the skewed generators put their points where they say", "[engine][balance]") {

@@ -338,7 +338,8 @@ void print_engine_stats(const ReplayStats& st) {
   std::snprintf(buf, sizeof buf, "%.4f%% (max over workers); %s operations ran with the world stopped",
                 100.0 * w.max_rollbacks_per_completed, format_count(st.engine_stats.global_operations).c_str());
   row("rollbacks/op", buf);
-  std::snprintf(buf, sizeof buf, "%.2f (max / mean completed per worker; 1 = even)", st.engine_stats.imbalance());
+  std::snprintf(buf, sizeof buf, "%.2f (max / mean completed per worker; 1 = even); blocks re-cut %s times",
+                st.engine_stats.imbalance(), format_count(st.engine_stats.recuts).c_str());
   row("imbalance", buf);
   if (st.engine_stats.workers.size() <= 64) {
     std::string per = "completed/steals:";

@@ -87,6 +87,7 @@ struct EngineStats {
   std::vector<WorkerStats> workers;
   std::uint64_t global_operations = 0;  // run with the world stopped (dimension changes, escalations)
   std::uint64_t client_errors = 0;      // exceptions from callbacks, hooks and resumed coroutines
+  std::uint64_t recuts = 0;             // times the blocks were re-cut to where the work is (rebalance)
   WorkerStats total() const;            // sums; max ratio is the max over workers
   // Load balance: max over workers of completed operations / the mean (1 = even).
   double imbalance() const;

@@ -3,7 +3,7 @@
 // insertions (duplicates and degenerate points included) and removals, cut
 // into segments run one after the other on the same triangulation: each
 // segment sequentially or on a fresh Engine (random workers, blocks,
-// stealing, escalation, contention settings, submission form), sometimes with
+// stealing, recuts, escalation, contention settings, submission form), sometimes with
 // clear() between segments and callbacks that throw. At the end the
 // triangulation must validate and equal CGAL's of the points left, with their
 // multiplicities. Seeded and reproducible: a failure prints its seed, then a
@@ -58,7 +58,7 @@ struct Segment {
   Runner runner = Runner::sequential;
   bool clear_before = false;
   unsigned workers = 1, blocks = 0, escalate = 64, window = 32;
-  bool stealing = true, throwing_callbacks = false;
+  bool stealing = true, rebalance = true, throwing_callbacks = false;
   double low = 0.7, high = 0.9;
 };
 
@@ -170,6 +170,7 @@ Case make_case(std::uint64_t seed) {
     s.workers = worker_counts[rng() % 6];
     s.blocks = rng() % 3 == 0 ? static_cast<unsigned>(1 + rng() % 12) : 0;
     s.stealing = rng() % 4 != 0;
+    s.rebalance = rng() % 4 != 0;
     s.escalate = rng() % 3 == 0 ? static_cast<unsigned>(1 + rng() % 8) : 64;
     s.window = 1 + static_cast<unsigned>(rng() % 32);
     s.low = std::uniform_real_distribution<double>(0, 0.9)(rng);
@@ -233,8 +234,9 @@ bool run_case(const Case& c, std::string& why, bool verbose) {
   std::size_t begin = 0;
   for (const Segment& s : c.segments) {
     if (verbose)
-      std::printf("  ops [%zu, %zu): %s, %u workers, blocks %u, stealing %d, escalate %u%s%s\n", begin, s.end,
-                  runner_name(s.runner), s.workers, s.blocks, s.stealing, s.escalate, s.clear_before ? ", clear first" : "",
+      std::printf("  ops [%zu, %zu): %s, %u workers, blocks %u, stealing %d, recuts %d, escalate %u%s%s\n", begin,
+                  s.end, runner_name(s.runner), s.workers, s.blocks, s.stealing, s.rebalance, s.escalate,
+                  s.clear_before ? ", clear first" : "",
                   s.throwing_callbacks ? ", callbacks throw" : "");
     if (s.clear_before) {
       t.clear();
@@ -274,6 +276,7 @@ bool run_case(const Case& c, std::string& why, bool verbose) {
           o.workers = s.workers;
           o.blocks_per_axis = s.blocks;
           o.stealing = s.stealing;
+          o.rebalance = s.rebalance;
           o.escalate_after = s.escalate;
           o.contention_window = s.window;
           o.contention_low = s.low;

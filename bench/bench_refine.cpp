@@ -27,10 +27,6 @@
 // dependent base), as in the sanitizer builds, which keep assertions: the
 // triangulation's preconditions are off here. pdt's own checks are not affected.
 #define CGAL_TRIANGULATION_NO_PRECONDITIONS
-#include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/version.h>
@@ -45,6 +41,7 @@
 #include <vector>
 
 #include "common/bench_util.hpp"
+#include "common/child.hpp"
 #include "common/report.hpp"
 #include "pdt/error.hpp"
 #include "pdt/triangulation.hpp"
@@ -261,43 +258,16 @@ Outcome run_pdt(const Options& o, const pdt_refine::Domain& d, unsigned workers)
   return out;
 }
 
-// Runs fn in a child process; the child's peak RSS is the configuration's.
+// Runs fn in a child process (common/child.hpp); the child's peak RSS is the configuration's.
 template <class Fn>
 Outcome in_child(Fn fn) {
-  int fd[2];
-  if (pipe(fd) != 0) throw pdt::Error(pdt::ErrorCode::io_failure, "pipe failed");
-  std::fflush(stdout);
-  const pid_t pid = fork();
-  if (pid < 0) throw pdt::Error(pdt::ErrorCode::io_failure, "fork failed");
-  if (pid == 0) {
-    close(fd[0]);
-    Outcome out;
-    try {
-      out = fn();
-    } catch (const std::exception& e) {
-      out.ok = false;
-      std::snprintf(out.error, sizeof out.error, "%s", e.what());
-    }
-    const ssize_t w = write(fd[1], &out, sizeof out);
-    _exit(w == static_cast<ssize_t>(sizeof out) ? 0 : 1);
-  }
-  close(fd[1]);
   Outcome out;
-  std::size_t got = 0;
-  while (got < sizeof out) {
-    const ssize_t n = read(fd[0], reinterpret_cast<char*>(&out) + got, sizeof out - got);
-    if (n <= 0) break;
-    got += static_cast<std::size_t>(n);
-  }
-  close(fd[0]);
-  int status = 0;
-  rusage ru{};
-  wait4(pid, &status, 0, &ru);
-  if (got != sizeof out || !WIFEXITED(status)) {
+  const ChildStatus st = pdt_bench::in_child(fn, out);
+  if (!st.ok) {
     out = Outcome{};
-    std::snprintf(out.error, sizeof out.error, "the configuration's process died (status %d)", status);
+    std::snprintf(out.error, sizeof out.error, "%s", st.error.c_str());
   }
-  out.peak_kib = ru.ru_maxrss;
+  out.peak_kib = st.peak_kib;
   return out;
 }
 

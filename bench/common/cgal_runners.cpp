@@ -12,6 +12,7 @@
 #include <CGAL/Triangulation_vertex_base_3.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include <boost/iterator/transform_iterator.hpp>
 #include <unordered_map>
 
 #include "common/bench_util.hpp"
@@ -23,6 +24,7 @@ namespace {
 
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using CgalDT = CGAL::Delaunay_triangulation_3<K, CGAL::Default, CGAL::Fast_location>;
+using CgalBatchDT = CGAL::Delaunay_triangulation_3<K>;
 using ParTds = CGAL::Triangulation_data_structure_3<CGAL::Triangulation_vertex_base_3<K>,
                                                    CGAL::Delaunay_triangulation_cell_base_3<K>, CGAL::Parallel_tag>;
 using LockGrid = CGAL::Spatial_lock_grid_3<CGAL::Tag_priority_blocking>;
@@ -35,6 +37,13 @@ std::vector<K::Point_3> to_cgal(const std::vector<pdt::Point3>& pts) {
   for (const auto& p : pts) c.emplace_back(p.x, p.y, p.z);
   return c;
 }
+
+// pdt's points as CGAL's, one at a time, for insert(first, last).
+struct ToCgal {
+  K::Point_3 operator()(const pdt::Point3& p) const { return {p.x, p.y, p.z}; }
+};
+auto cgal_begin(const std::vector<pdt::Point3>& pts) { return boost::make_transform_iterator(pts.begin(), ToCgal{}); }
+auto cgal_end(const std::vector<pdt::Point3>& pts) { return boost::make_transform_iterator(pts.end(), ToCgal{}); }
 
 double rss() { return static_cast<double>(pdt::support::current_rss_bytes()); }
 
@@ -127,6 +136,30 @@ double cgal_batch_insert(const std::vector<pdt::Point3>& pts, std::size_t* cells
   }
   settle();
   return seconds;
+}
+
+CgalInsert cgal_range_insert(const std::vector<pdt::Point3>& pts, const pdt::Box& box, unsigned threads) {
+  CgalInsert r;
+  if (threads == 0) {
+    CgalBatchDT dt;
+    Stopwatch sw;
+    dt.insert(cgal_begin(pts), cgal_end(pts));
+    r.seconds = sw.seconds();
+    r.vertices = dt.number_of_vertices();
+    r.finite_cells = dt.number_of_finite_cells();
+    return r;
+  }
+  tbb::task_arena arena(static_cast<int>(threads));
+  LockGrid lock(CGAL::Bbox_3(box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y, box.hi.z), lock_grid_cells_per_axis);
+  CgalParDT dt(&lock);
+  arena.execute([&] {
+    Stopwatch sw;
+    dt.insert(cgal_begin(pts), cgal_end(pts));
+    r.seconds = sw.seconds();
+  });
+  r.vertices = dt.number_of_vertices();
+  r.finite_cells = dt.number_of_finite_cells();
+  return r;
 }
 
 CgalRun cgal_parallel(const std::vector<pdt::Point3>& pts, const pdt::Box& box, const std::vector<char>& removes,

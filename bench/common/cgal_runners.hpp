@@ -6,6 +6,9 @@
 //               insert(p) one at a time (no spatial sort), remove(vh) one at a time
 //   batch       the same triangulation, insert(first, last) (CGAL spatially
 //               sorts the range, inside the timing)
+//   range       Delaunay_triangulation_3<Epick> (no Fast_location: a batch
+//               needs no hierarchy), insert(first, last) straight from pdt's
+//               points; or the parallel one below, the same way
 //   parallel    Parallel_tag TDS + Spatial_lock_grid_3<Tag_priority_blocking>,
 //               in a tbb::task_arena(T): insert(range), then remove(range)
 // CGAL's Parallel_tag containers allocate with tbb::scalable_allocator: the
@@ -41,6 +44,15 @@ CgalRun cgal_sequential(const std::vector<pdt::Point3>& pts, const std::vector<c
 CgalRun cgal_sequential_stream(const pdt::OpStream& s);
 // insert(first, last): returns the time; *cells gets the number of cells.
 double cgal_batch_insert(const std::vector<pdt::Point3>& pts, std::size_t* cells);
+// The range insertion on its own (bench_peers): threads 0 = the sequential
+// triangulation, else the parallel one in a tbb::task_arena(threads). The
+// points go in through a converting iterator, so the only copy is CGAL's own
+// (which it spatially sorts, inside the timing).
+struct CgalInsert {
+  double seconds = 0;
+  std::size_t vertices = 0, finite_cells = 0;
+};
+CgalInsert cgal_range_insert(const std::vector<pdt::Point3>& pts, const pdt::Box& box, unsigned threads);
 CgalRun cgal_parallel(const std::vector<pdt::Point3>& pts, const pdt::Box& box, const std::vector<char>& removes,
                       unsigned threads);
 

@@ -4,7 +4,7 @@
 // Delaunay_triangulation_3, same points, same run.
 //
 //   bench_parallel [--points N] [--threads 1,2,4,8,16] [--dists uniform,normal,line]
-//                  [--remove-fraction F] [--extreme] [--interleaved] [--skip-cgal-parallel]
+//                  [--remove-fraction F] [--extreme] [--interleaved] [--skip-cgal-parallel] [--skip-main]
 //                  [--skewed [--trace FILE]] [--seed S] [--csv FILE] [--timeout S]
 //
 // Per distribution: N points from pdt::generate (random order).
@@ -92,6 +92,7 @@ struct Options {
   bool skewed = false;
   std::string trace;  // a refiner's trace (pdt refine --trace), replayed with the skewed streams
   bool cgal_parallel = true;
+  bool main_tables = true;  // false: the distributions only feed --interleaved
   std::uint64_t seed = 1;
   std::string csv;
   double timeout = 3600;  // seconds one configuration may take before the run is declared hung; 0 = never
@@ -113,12 +114,15 @@ Options parse(int argc, char** argv) {
             "interleaved (fraction 0.3); stealing + recuts, stealing only, neither", o.skewed);
   args.text("--trace", "with --skewed: also replay this operation stream (e.g. pdt refine --trace)", o.trace);
   args.flag("--skip-cgal-parallel", "do not run CGAL's Parallel_tag triangulation", skip_cgal_parallel);
+  bool skip_main = false;
+  args.flag("--skip-main", "no insert-then-remove table: the distributions feed --interleaved only", skip_main);
   args.count("--seed", "generator seed (default 1)", o.seed);
   args.text("--csv", "also write every measurement as a CSV row to this file", o.csv);
   args.real("--timeout", "declare a configuration hung after S seconds (default 3600; 0 = never; an extreme-case "
             "run: at most 120): print HANG and exit 3", o.timeout, 0, 1e300);
   args.parse(argc, argv);
   o.cgal_parallel = !skip_cgal_parallel;
+  o.main_tables = !skip_main;
   // Speedup1 needs the 1-thread run; keep the order given otherwise, no repeats.
   std::vector<unsigned> ts{1};
   for (unsigned t : o.threads)
@@ -789,7 +793,8 @@ int main(int argc, char** argv) {
   try {
     Csv csv;
     csv.open(o.csv);
-    for (pdt::Distribution d : dists) mismatches += main_table(o, d, csv);
+    if (o.main_tables)
+      for (pdt::Distribution d : dists) mismatches += main_table(o, d, csv);
     if (o.interleaved)
       for (pdt::Distribution d : dists) mismatches += interleaved_table(o, d, csv);
     if (o.skewed) mismatches += skewed_tables(o, csv);

@@ -1192,29 +1192,51 @@ TEST_CASE("engine: a recut gives each block an equal share of the work, and rout
   REQUIRE(part.block_of_key(pdt::detail::Partition::key_end - 1) == part.blocks() - 1);
 }
 
-TEST_CASE("engine: recuts happen on a cluster and give CGAL's triangulation", "[engine][balance][tsan]") {
-  // A Kuzmin cluster submitted at once: the workers that run out of blocks
-  // find the work piled in the few blocks others serve, and re-cut.
-  const std::size_t n = scaled(20000, 4000);
-  const pdt::OpStream s = generated(pdt::Distribution::kuzmin, n, 0.3, pdt::RemovalOrder::interleaved, 9);
+TEST_CASE("engine: recuts happen when the work piles up in one block, and give CGAL's triangulation",
+          "[engine][balance][tsan]") {
+  // Every point in the corner [0, 0.45]^3, with 2 blocks per axis: all the
+  // work lands in one block. The first callback holds its worker until the
+  // whole stream is queued; then the two workers running find that block held
+  // by the other with thousands of operations waiting, and one re-cuts.
+  const std::size_t n = scaled(20000, 8000);
+  const pdt::OpStream s = generated(pdt::Distribution::corner, n, 0.3, pdt::RemovalOrder::interleaved, 9);
   pdt::Triangulation seq;
   replay_sequential(seq, s);
-  std::uint64_t recuts = 0;
-  for (int attempt = 0; attempt < 4 && recuts == 0; ++attempt) {
-    for (bool rebalance : {true, false}) {
-      INFO("attempt " << attempt << ", rebalance " << rebalance);
-      pdt::EngineOptions o = options_with(8);
-      o.blocks_per_axis = 4;
-      o.rebalance = rebalance;
-      pdt::Triangulation t;
-      const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, 4);
-      require_stats(run, s.ops.size(), 8);
-      if (!rebalance) REQUIRE(run.stats.recuts == 0);
-      if (rebalance) recuts += run.stats.recuts;
-      require_result(t, s, &seq);
-    }
+  for (bool rebalance : {true, false}) {
+    INFO("rebalance " << rebalance);
+    pdt::EngineOptions o = options_with(4);
+    o.blocks_per_axis = 2;
+    o.rebalance = rebalance;
+    pdt::Triangulation t;
+    std::atomic<bool> queued_all{false}, first{true};
+    std::atomic<std::uint64_t> failed{0};
+    pdt::EngineStats stats;
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::Engine e(t, *s.box, o);
+      const pdt::Engine::Callback done = [&](const pdt::OpResult& r) {
+        if (r.error) failed.fetch_add(1);
+        if (first.exchange(false))
+          while (!queued_all.load()) std::this_thread::yield();
+      };
+      for (const pdt::Operation& op : s.ops) {
+        if (op.kind == pdt::Operation::Kind::insert)
+          (void)e.insert(op.point, done);
+        else
+          e.remove_insertion(op.target, done);
+      }
+      queued_all.store(true);
+      e.drain();
+      stats = e.stats();
+    });
+    REQUIRE(failed.load() == 0);
+    REQUIRE(stats.total().completed == s.ops.size());
+    if (rebalance)
+      REQUIRE(stats.recuts > 0);
+    else
+      REQUIRE(stats.recuts == 0);
+    require_result(t, s, &seq);
   }
-  CHECK(recuts > 0);
 }
 
 TEST_CASE("engine: the skewed generators put their points where they say", "[engine][balance]") {

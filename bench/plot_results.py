@@ -94,7 +94,8 @@ def plot_skewed(rows, out, machine):
     fig, axes = panel_axes(len(streams))
     for ax, d in zip(axes, streams):
         threads = []
-        for impl, style, label in [("pdt", "o-", "stealing on"), ("pdt_nosteal", "s--", "stealing off")]:
+        for impl, style, label in [("pdt", "o-", "stealing + recuts"), ("pdt_norecut", "^-.", "stealing only"),
+                                   ("pdt_nosteal", "s--", "static")]:
             ts, sp = speedups(seconds_by(rows, experiment="skewed", dist=d, impl=impl, phase="mixed"))
             if ts:
                 ax.plot(ts, sp, style, label=label)

@@ -53,9 +53,13 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   // Everything that may fail comes first; the triangulation is touched last.
   for (std::uint32_t i = 0; i < partition.blocks(); ++i) blocks[i].home = partition.home_of(i);
   sleepers.reserve(nworkers);
-  recut_keys.reserve(std::size_t{partition.blocks()} * recut_sample_per_block);
+  if (opts.stealing && opts.rebalance && nworkers > 1)
+    recut_keys.reserve(std::size_t{partition.blocks()} * recut_sample_per_block);
   workers.reserve(nworkers);
-  for (unsigned i = 0; i < nworkers; ++i) workers.push_back(std::make_unique<Worker>(i, impl.new_context_id(), opts));
+  for (unsigned i = 0; i < nworkers; ++i) {
+    workers.push_back(std::make_unique<Worker>(i, impl.new_context_id(), opts));
+    workers.back()->spare = records.acquire();
+  }
   kernel_hook = [this](const Changes& c) {
     try {
       if (user_hook) user_hook(c);

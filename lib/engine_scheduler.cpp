@@ -126,7 +126,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         if (op->run_end) run = op;
       }
       if (run) {
-        op = take_from_run(run);
+        op = take_from_run(w, run);
         if (!op) break;  // no record to be had now: the run waits in its block
       }
       const Outcome outcome = execute(w, op);
@@ -159,12 +159,14 @@ WorkerCoroutine EngineState::body(Worker& w) {
   }
 }
 
-OpRecord* EngineState::take_from_run(OpRecord*& run) {
+OpRecord* EngineState::take_from_run(Worker& w, OpRecord*& run) {
   OpRecord* one = nullptr;
   try {
+    if (!w.spare) w.spare = records.acquire();
     one = records.acquire();
   } catch (const std::bad_alloc&) {
-    return nullptr;
+    std::swap(one, w.spare);  // the spare, if there is one
+    if (!one) return nullptr;
   }
   assert(run->run_next < run->run_end);
   const BatchCallback& batch = *run->batch_done;
@@ -270,10 +272,11 @@ std::uint64_t EngineState::completed_total() const {
 bool EngineState::maybe_recut(Worker& w) {
   if (!opts.stealing || !opts.rebalance || nworkers < 2 || world.stopped()) return false;
   const std::uint32_t count = partition.blocks();
-  std::uint64_t queued = 0;
-  for (std::uint32_t i = 0; i < count; ++i) queued += blocks[i].queued.load(std::memory_order_relaxed);
-  // claim() found nothing, so this work is in blocks that others serve.
-  if (queued < recut_min_queued * nworkers || completed_total() < recut_after.load(std::memory_order_relaxed))
+  // claim() found nothing, so the pending work is in blocks that others
+  // serve (or in their hands, or waiting on a ticket). Counted in operations:
+  // a run of a batch is one record but many points.
+  const std::uint64_t pending = in_flight();
+  if (pending < recut_min_queued * nworkers || completed_total() < recut_after.load(std::memory_order_relaxed))
     return false;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return false;
@@ -294,27 +297,38 @@ bool EngineState::maybe_recut(Worker& w) {
   }
   bool recut = false;
   if (claimed == count) {
-    // Every queued operation out, chained in order through its (now free)
-    // queue link;
-    // a sample of the keys of those that know their place.
+    // Every queued record out, chained in order through its (now free) queue
+    // link, and how many operations they stand for (a run: its points left).
     OpRecord* first = nullptr;
     OpRecord* last = nullptr;
-    std::uint64_t stride = std::max<std::uint64_t>(1, queued / recut_keys.capacity());
-    std::uint64_t seen = 0;
-    recut_keys.clear();
+    std::uint64_t weight = 0;
+    auto weight_of = [](const OpRecord* op) -> std::uint64_t { return op->run_end ? op->run_end - op->run_next : 1; };
     for (std::uint32_t i = 0; i < count; ++i) {
       Block& b = blocks[i];
       while (OpRecord* op = b.queue.pop()) {
         b.queued.fetch_sub(1, std::memory_order_relaxed);
-        if (op->routed && seen++ % stride == 0 && recut_keys.size() < recut_keys.capacity())
-          recut_keys.push_back(partition.key_of(op->point));  // within capacity: no allocation
         op->next.store(nullptr, std::memory_order_relaxed);
         if (last)
           last->next.store(op, std::memory_order_relaxed);
         else
           first = op;
         last = op;
+        if (op->routed) weight += weight_of(op);
       }
+    }
+    // A sample of their keys, every stride-th operation (within capacity: no
+    // allocation), and the cut at its quantiles.
+    recut_keys.clear();
+    const std::uint64_t stride = std::max<std::uint64_t>(1, (weight + recut_keys.capacity() - 1) /
+                                                                std::max<std::size_t>(1, recut_keys.capacity()));
+    std::uint64_t seen = 0;
+    for (OpRecord* op = first; op; op = op->next.load(std::memory_order_relaxed)) {
+      if (!op->routed) continue;
+      const std::uint64_t key = partition.key_of(op->point);
+      const std::uint64_t next = seen + weight_of(op);
+      for (std::uint64_t at = (seen + stride - 1) / stride * stride; at < next; at += stride)
+        if (recut_keys.size() < recut_keys.capacity()) recut_keys.push_back(key);
+      seen = next;
     }
     if (!recut_keys.empty()) {
       std::sort(recut_keys.begin(), recut_keys.end());
@@ -322,7 +336,6 @@ bool EngineState::maybe_recut(Worker& w) {
       recut = true;
     }
     // Back in, each to its block under the new cut, in their old order.
-    std::uint64_t moved_count = 0;
     while (first) {
       OpRecord* op = first;
       first = op->next.load(std::memory_order_relaxed);
@@ -331,18 +344,17 @@ bool EngineState::maybe_recut(Worker& w) {
                                                   (op->vertex != no_vertex ? op->vertex : op->ticket) % count);
       blocks[dest].queued.fetch_add(1, std::memory_order_relaxed);
       blocks[dest].queue.push(op);
-      ++moved_count;
     }
-    recut_after.store(completed_total() + moved_count / 2, std::memory_order_relaxed);
+    recut_after.store(completed_total() + weight / 2, std::memory_order_relaxed);
     if (recut) recuts.fetch_add(1, std::memory_order_relaxed);
   } else {
-    recut_after.store(completed_total() + queued / 2, std::memory_order_relaxed);
+    recut_after.store(completed_total() + pending / 2, std::memory_order_relaxed);
   }
   for (std::uint32_t i = 0; i < claimed; ++i) blocks[i].holder.store(-1, std::memory_order_release);
   world.restart(lock, [this](std::coroutine_handle<> h) { spawn(h); });
   // The work is spread now: let the idle workers at it.
-  while (idle_count.load(std::memory_order_seq_cst) > 0 && wake_idle()) {
-  }
+  for (unsigned k = 0; k < nworkers && idle_count.load(std::memory_order_seq_cst) > 0; ++k)
+    if (!wake_idle()) break;
   return recut;
 }
 

@@ -6,7 +6,8 @@
 //   op_record.hpp          submitted operations and their pool
 //   tickets.hpp            insertions by ticket, and undos waiting for them
 //   contention_manager.hpp the progress ratio and its verdicts
-//   stopped_world.hpp      running alone (dimension changes, escalations, grid growth)
+//   stopped_world.hpp      running alone (dimension changes, escalations, grid growth,
+//                          recuts)
 //   engine_scheduler.cpp   the workers: coroutine bodies, claiming blocks
 //                          (home first, then stealing), phases and wake-ups
 //   engine_execute.cpp     running one operation and completing it
@@ -31,11 +32,13 @@
 //             served by others meanwhile (stealing), so a sleeper never holds
 //             work hostage.
 // Rebalancing (a recut): the worker stops the world, claims every block (a
-// holder lets go within one operation, which finds the world stopped), moves
-// every queued operation out, re-cuts the partition at quantiles of their
-// keys, puts each back in its new block and restarts the world. It runs only
-// when it can pay: at least `recut_min_queued` per worker wait, and the
-// workers completed since the last recut at least half what was queued then.
+// holder lets go within one operation, which finds the world stopped; one
+// that does not within 20 ms, a callback that blocks, cancels the recut),
+// moves every queued record out, re-cuts the partition at the quantiles of
+// their keys (a run weighs as many points as it has left), puts each back in
+// its new block and restarts the world. It runs only when it can pay: at
+// least `recut_min_queued` operations per worker are pending, and the workers
+// completed since the last recut at least half the operations queued then.
 // Invariants (checked in debug builds where they are local):
 //   - a block is served by at most one worker: Block::holder;
 //   - `active` counts running workers; a worker never sleeps when it is the
@@ -126,6 +129,10 @@ struct alignas(64) Worker {
   std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
+  // A record kept for a run's next point when the pool cannot give one (out
+  // of memory): with it a worker always makes progress, and the record it
+  // frees on completion serves the next point. Refilled when the pool can.
+  OpRecord* spare = nullptr;
   std::chrono::steady_clock::time_point slept_at;
   // Statistics: written by the worker, read by stats() (relaxed).
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},
@@ -164,7 +171,7 @@ struct EngineState {
   std::atomic<std::uint64_t> recuts{0};
   std::atomic<std::uint64_t> recut_after{0};
   // The recutting worker's scratch (with the world stopped, by its stopper):
-  // a sample of the queued keys. Reserved once; a recut allocates nothing else.
+  // a sample of the queued keys, reserved once when recuts may happen.
   std::vector<std::uint64_t> recut_keys;
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
@@ -180,7 +187,7 @@ struct EngineState {
   static constexpr std::uint32_t batch = 64;  // operations served per block claim
   static constexpr std::uint32_t max_repeat = 16;  // claims of one home block in a row
   static constexpr std::uint32_t max_run = 256;    // points of an insert_batch run
-  static constexpr std::uint64_t recut_min_queued = 2 * batch;  // per worker, for a recut to pay
+  static constexpr std::uint64_t recut_min_queued = 2 * batch;  // pending operations per worker, for a recut to pay
   static constexpr std::size_t recut_sample_per_block = 32;      // keys sampled per block
 
   // -- submission (engine.cpp) ---------------------------------------------------
@@ -211,10 +218,10 @@ struct EngineState {
   // Worker w (holding no block, in no operation) found nothing to claim:
   // re-cut the blocks if work piles up where others are. True if it did.
   bool maybe_recut(Worker& w);
-  // The next point of a run (held by its worker, not queued) as a record of
-  // its own; the run is released after its last point. Null when no record
-  // can be had (out of memory): the run stays as it was.
-  OpRecord* take_from_run(OpRecord*& run);
+  // The next point of a run (held by worker w, not queued) as a record of
+  // its own; the run is released after its last point. Null only when
+  // neither the pool nor w's spare has a record (the run stays as it was).
+  OpRecord* take_from_run(Worker& w, OpRecord*& run);
   bool idle_everywhere() const;  // no operation pending
   std::uint64_t in_flight() const;
   WorkerCoroutine body(Worker& w);

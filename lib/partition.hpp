@@ -3,8 +3,8 @@
 // Partition (paper §3.1, made finer and adaptive for load balance): the domain
 // box ordered along a fine Morton (Z-order) curve, 2^16 cells per axis, and
 // the curve cut into `blocks()` intervals. Block i holds the points whose key
-// lies in [split(i), split(i + 1)), so consecutive blocks are neighbouring
-// regions. Worker w's home is the run of blocks [home_first(w),
+// lies in [split(i), split(i + 1)), so consecutive blocks are mostly
+// neighbouring regions (a Z-curve jumps now and then). Worker w's home is the run of blocks [home_first(w),
 // home_first(w + 1)); blocks much outnumber workers, so a worker can take over
 // part of another's region block by block.
 //

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // The stopped world: what cannot run under vertex locks (a change of
-// dimension, an operation that escalated, the jump grid's regrowth) runs
-// while no other worker is inside an operation.
+// dimension, an operation that escalated, the jump grid's regrowth, a recut
+// of the blocks) runs while no other worker is inside an operation.
 //
 // Protocol (all seq_cst): a worker announces in_op[i] = true, then checks
 // `stopped`; if it is set, the worker withdraws (in_op[i] = false) and
@@ -23,7 +23,12 @@ namespace pdt::detail {
 
 class StoppedWorld {
  public:
-  explicit StoppedWorld(unsigned workers) : in_op_(std::make_unique<Flag[]>(workers)), workers_(workers) {}
+  // Room for every worker's handle in both lists, once: stopping, waiting
+  // and restarting never allocate.
+  explicit StoppedWorld(unsigned workers) : in_op_(std::make_unique<Flag[]>(workers)), workers_(workers) {
+    waiters_.reserve(workers);
+    resuming_.reserve(workers);
+  }
 
   bool stopped() const { return stopped_.load(std::memory_order_seq_cst); }
   // Worker i enters an operation: false (and not entered) while the world is stopped.
@@ -46,14 +51,12 @@ class StoppedWorld {
   }
 
   // Worker i (not inside an operation) stops the world: true when it now runs
-  // alone; false when another worker holds the world (retry later). The
-  // waiters vector has room for every worker, so registering never allocates.
+  // alone; false when another worker holds the world (retry later).
   bool try_stop(unsigned i, std::unique_lock<std::mutex>& lock) {
     lock = std::unique_lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return false;
     {
       std::lock_guard w(waiters_mutex_);
-      waiters_.reserve(workers_);
       stopped_.store(true, std::memory_order_seq_cst);
     }
     for (unsigned k = 0; k < workers_; ++k)
@@ -62,16 +65,20 @@ class StoppedWorld {
     return true;
   }
   // Restarts the world and resumes every waiter with resume(handle).
+  // The waiters are resumed while the stopper still holds the world, so the
+  // next stop cannot start (and reuse `resuming_`) before they are all on
+  // their way; a worker that tries meanwhile just finds the world held.
   template <class Resume>
   void restart(std::unique_lock<std::mutex>& lock, Resume resume) {
-    std::vector<std::coroutine_handle<>> woken;
     {
       std::lock_guard w(waiters_mutex_);
       stopped_.store(false, std::memory_order_seq_cst);
-      woken.swap(waiters_);
+      resuming_.assign(waiters_.begin(), waiters_.end());  // within capacity
+      waiters_.clear();
     }
+    for (std::coroutine_handle<> h : resuming_) resume(h);
+    resuming_.clear();
     lock.unlock();
-    for (std::coroutine_handle<> h : woken) resume(h);
   }
 
  private:
@@ -84,6 +91,7 @@ class StoppedWorld {
   std::atomic<bool> stopped_{false};
   std::mutex waiters_mutex_;
   std::vector<std::coroutine_handle<>> waiters_;
+  std::vector<std::coroutine_handle<>> resuming_;  // restart's copy, under mutex_
 };
 
 }  // namespace pdt::detail

@@ -28,6 +28,9 @@ struct EngineOptions {
   // workers' blocks. Off: each block is served by its home worker only
   // (the paper's static partition).
   bool stealing = true;
+  // Deprecated: the name of `workers` in pdt 0.1 (it counts workers, not
+  // threads); used only when workers is 0. PDT_THREADS is read into workers.
+  unsigned threads = 0;
   // PDT_REBALANCE (0 or 1), with stealing: when queued work piles up in the
   // few blocks other workers already serve (a cluster, a front) while a
   // worker has nothing to do, that worker re-cuts the blocks at quantiles of
@@ -35,9 +38,6 @@ struct EngineOptions {
   // block, and every worker's home, holds about the same work. Routing only:
   // the result is the same triangulation either way.
   bool rebalance = true;
-  // Deprecated: the name of `workers` in pdt 0.1 (it counts workers, not
-  // threads); used only when workers is 0. PDT_THREADS is read into workers.
-  unsigned threads = 0;
 
   // Starts from `defaults` and overrides each field whose variable is set.
   // Throws pdt::Error(invalid_argument) naming the variable for a bad value.

@@ -186,16 +186,21 @@ Outcome run_hxt(const std::vector<pdt::Point3>& pts, unsigned threads) {
 }
 #endif
 
-Outcome run_pdt_batch(const std::vector<pdt::Point3>& pts) {
-  Outcome out;
-  pdt::Triangulation t;
-  Stopwatch sw;
-  const std::vector<pdt::InsertResult> res = t.insert_batch(pts);
-  out.seconds = sw.seconds();
+// What every pdt run reports once its triangulation is built.
+Outcome& finish(Outcome& out, const pdt::Triangulation& t) {
   out.vertices = t.number_of_vertices();
   out.finite_cells = t.number_of_finite_cells();
   out.peak_bytes = pdt::support::peak_rss_bytes();
   return out;
+}
+
+Outcome run_pdt_batch(const std::vector<pdt::Point3>& pts) {
+  Outcome out;
+  pdt::Triangulation t;
+  Stopwatch sw;
+  (void)t.insert_batch(pts);
+  out.seconds = sw.seconds();
+  return finish(out, t);
 }
 
 Outcome run_pdt_engine(const std::vector<pdt::Point3>& pts, const pdt::Box& box, unsigned threads) {
@@ -213,10 +218,7 @@ Outcome run_pdt_engine(const std::vector<pdt::Point3>& pts, const pdt::Box& box,
       out.seconds = sw.seconds();
     });
   }
-  out.vertices = t.number_of_vertices();
-  out.finite_cells = t.number_of_finite_cells();
-  out.peak_bytes = pdt::support::peak_rss_bytes();
-  return out;
+  return finish(out, t);
 }
 
 Outcome run_cgal(const std::vector<pdt::Point3>& pts, const pdt::Box& box, unsigned threads) {

@@ -276,7 +276,7 @@ bool EngineState::maybe_recut(Worker& w) {
   // serve (or in their hands, or waiting on a ticket). Counted in operations:
   // a run of a batch is one record but many points.
   const std::uint64_t pending = in_flight();
-  if (pending < recut_min_queued * nworkers || completed_total() < recut_after.load(std::memory_order_relaxed))
+  if (pending < recut_min_pending * nworkers || completed_total() < recut_after.load(std::memory_order_relaxed))
     return false;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return false;

@@ -37,7 +37,7 @@
 // moves every queued record out, re-cuts the partition at the quantiles of
 // their keys (a run weighs as many points as it has left), puts each back in
 // its new block and restarts the world. It runs only when it can pay: at
-// least `recut_min_queued` operations per worker are pending, and the workers
+// least `recut_min_pending` operations per worker are pending, and the workers
 // completed since the last recut at least half the operations queued then.
 // Invariants (checked in debug builds where they are local):
 //   - a block is served by at most one worker: Block::holder;
@@ -187,7 +187,7 @@ struct EngineState {
   static constexpr std::uint32_t batch = 64;  // operations served per block claim
   static constexpr std::uint32_t max_repeat = 16;  // claims of one home block in a row
   static constexpr std::uint32_t max_run = 256;    // points of an insert_batch run
-  static constexpr std::uint64_t recut_min_queued = 2 * batch;  // pending operations per worker, for a recut to pay
+  static constexpr std::uint64_t recut_min_pending = 2 * batch;  // pending operations per worker, for a recut to pay
   static constexpr std::size_t recut_sample_per_block = 32;      // keys sampled per block
 
   // -- submission (engine.cpp) ---------------------------------------------------

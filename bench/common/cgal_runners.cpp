@@ -140,25 +140,22 @@ double cgal_batch_insert(const std::vector<pdt::Point3>& pts, std::size_t* cells
 
 CgalInsert cgal_range_insert(const std::vector<pdt::Point3>& pts, const pdt::Box& box, unsigned threads) {
   CgalInsert r;
-  if (threads == 0) {
-    CgalBatchDT dt;
+  auto insert_all = [&](auto& dt) {
     Stopwatch sw;
     dt.insert(cgal_begin(pts), cgal_end(pts));
     r.seconds = sw.seconds();
     r.vertices = dt.number_of_vertices();
     r.finite_cells = dt.number_of_finite_cells();
+  };
+  if (threads == 0) {
+    CgalBatchDT dt;
+    insert_all(dt);
     return r;
   }
   tbb::task_arena arena(static_cast<int>(threads));
   LockGrid lock(CGAL::Bbox_3(box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y, box.hi.z), lock_grid_cells_per_axis);
   CgalParDT dt(&lock);
-  arena.execute([&] {
-    Stopwatch sw;
-    dt.insert(cgal_begin(pts), cgal_end(pts));
-    r.seconds = sw.seconds();
-  });
-  r.vertices = dt.number_of_vertices();
-  r.finite_cells = dt.number_of_finite_cells();
+  arena.execute([&] { insert_all(dt); });
   return r;
 }
 

@@ -2,6 +2,8 @@
 // Insertion (paper §2.1): Bowyer-Watson. Locate p, gather the conflict zone
 // (the cells whose perturbed circumsphere holds p), and replace it by the cone
 // from the new vertex over the zone's boundary.
+#include <array>
+#include <cassert>
 #include <cstring>
 
 #include "fault_injection.hpp"
@@ -159,6 +161,30 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
   return status;
 }
 
+namespace {
+
+// For the cone's cell over boundary facet f (v at position f): its facets
+// through v, each with the directed boundary edge (x, y) that follows v in the
+// facet's cyclic order (facet_vertex), as positions in the cell.
+struct ConeFacet {
+  int k, x, y;
+};
+constexpr auto cone_facets = [] {
+  std::array<std::array<ConeFacet, 3>, 4> out{};
+  for (int f = 0; f < 4; ++f) {
+    int i = 0;
+    for (int k = 0; k < 4; ++k) {
+      if (k == f) continue;
+      const int* fv = detail::facet_vertex[k];
+      const int j = fv[0] == f ? 0 : fv[1] == f ? 1 : 2;
+      out[f][i++] = {k, fv[(j + 1) % 3], fv[(j + 2) % 3]};
+    }
+  }
+  return out;
+}();
+
+}  // namespace
+
 void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
   // Replace the conflict zone by the cone from v over its boundary. Its cells
   // are recycled first so the new cells reuse their memory. Nothing here
@@ -168,8 +194,6 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
     note_destroyed(ctx, c);
     free_cell(ctx, c);
   }
-  detail::IdMap& edges = ctx.new_cell_by_edge;
-  edges.clear();
   for (OpContext::BoundaryFacet& bf : ctx.boundary) {
     bf.v[bf.facet] = v;
     CellId nc = alloc_cell(ctx);
@@ -179,25 +203,69 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
     set_adjacency(nc, bf.facet, bf.outer >> 2, static_cast<int>(bf.outer & 3));
     bool finite = true;
     for (int k = 0; k < 4; ++k) {
-      if (r.v[k] == 0) finite = false;
-      set_vertex_cell(r.v[k], nc);
+      const VertexId w = r.v[k];
+      if (w == 0) {
+        finite = false;
+        continue;
+      }
+      verts[w].cell = nc;
+      verts[w].scratch = 0;  // unnumbered (link_cone)
     }
     if (finite) ++ctx.d_finite_cells;
-    // The three facets through v: each is identified by the zone-boundary
-    // edge it contains; the two new cells on that edge are neighbours.
-    for (int k = 0; k < 4; ++k) {
-      if (k == bf.facet) continue;
-      int a = -1, b = -1;
-      for (int t = 0; t < 4; ++t) {
-        if (t == k || t == bf.facet) continue;
-        (a < 0 ? a : b) = t;
-      }
-      bool inserted = false;
-      std::uint32_t val = edges.get_or_insert(edge_key(r.v[a], r.v[b]), 4 * nc + static_cast<std::uint32_t>(k), &inserted);
-      if (!inserted) set_adjacency(nc, k, val >> 2, static_cast<int>(val & 3));
-    }
+    bf.outer = nc;  // from here on: the new cell
   }
+  link_cone(ctx);
   ctx.stats.cells_created_by_insert += ctx.boundary.size();
+}
+
+void Triangulation::Impl::link_cone(OpContext& ctx) {
+  // The new cells' facets through v pair up: facet k of new cell c holds v
+  // and one boundary edge, seen from c as the directed edge (x, y) that
+  // follows v in the facet's cyclic order; the cell across sees (y, x)
+  // (storage.hpp: a shared facet is listed in opposite cyclic orders). Every
+  // directed edge of the closed boundary surface occurs exactly once, so a
+  // table indexed by directed edge needs no clearing: all writes, then all
+  // reads. The cone's vertices are numbered in their scratch words (zeroed
+  // by cone_from_vertex), which this operation owns: it holds them
+  // exclusively. The infinite vertex, which nobody locks, keeps number 0
+  // and its scratch is never written.
+  std::vector<OpContext::BoundaryFacet>& bnd = ctx.boundary;
+  constexpr std::uint32_t ids = OpContext::cone_ids;
+  std::uint32_t next = 1;
+  for (const OpContext::BoundaryFacet& bf : bnd)
+    for (int t = 0; t < 4; ++t) {
+      const VertexId w = bf.v[t];
+      if (w == 0) continue;
+      std::uint32_t& s = verts[w].scratch;
+      const std::uint32_t unnumbered = s == 0;
+      s |= unnumbered * next;
+      next += unnumbered;
+    }
+  if (next <= ids) {
+    std::uint32_t* table = ctx.cone_edge.data();
+    for (OpContext::BoundaryFacet& bf : bnd)
+      for (VertexId& w : bf.v) w = verts[w].scratch;  // bf.v now holds numbers
+    for (const OpContext::BoundaryFacet& bf : bnd)
+      for (const ConeFacet& cf : cone_facets[bf.facet])
+        table[ids * bf.v[cf.x] + bf.v[cf.y]] = 4 * bf.outer + static_cast<std::uint32_t>(cf.k);
+    for (const OpContext::BoundaryFacet& bf : bnd)
+      for (const ConeFacet& cf : cone_facets[bf.facet]) {
+        const std::uint32_t across = table[ids * bf.v[cf.y] + bf.v[cf.x]];
+        assert(cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.x] &&
+               cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.y]);
+        cells[bf.outer].n[cf.k] = across;
+      }
+    return;
+  }
+  detail::IdMap& edges = ctx.new_cell_by_edge;  // reserved by the caller for 3 entries per facet
+  edges.clear();
+  for (const OpContext::BoundaryFacet& bf : bnd)
+    for (const ConeFacet& cf : cone_facets[bf.facet]) {
+      bool inserted = false;
+      const std::uint32_t val = edges.get_or_insert(edge_key(bf.v[cf.x], bf.v[cf.y]),
+                                                    4 * bf.outer + static_cast<std::uint32_t>(cf.k), &inserted);
+      if (!inserted) set_adjacency(bf.outer, cf.k, val >> 2, static_cast<int>(val & 3));
+    }
 }
 
 }  // namespace pdt

@@ -53,11 +53,17 @@ struct OpContext {
   // its boundary facets, and the new cells by the boundary edge they contain.
   struct BoundaryFacet {
     VertexId v[4];        // the new cell's vertices
-    std::uint32_t outer;  // 4*outer cell + mirror facet
+    std::uint32_t outer;  // 4*outer cell + mirror facet; cone_from_vertex: then the new cell
     int facet;            // index of the boundary facet in the new cell
   };
   std::vector<CellId> conflict_zone;
   std::vector<BoundaryFacet> boundary;
+  // The cone's internal facets, matched by the boundary edge they contain:
+  // with at most cone_ids boundary vertices numbered 0..cone_ids-1 (0 the
+  // infinite vertex's), cone_edge[cone_ids * a + b] is 4 * new cell + facet
+  // for the facet that sees the directed edge (a, b); larger cones use the map.
+  static constexpr std::uint32_t cone_ids = 64;
+  std::vector<std::uint32_t> cone_edge;
   IdMap new_cell_by_edge;
   // Removal: the hole (the removed vertex's star), its boundary facets keyed by
   // small-id triple, and the link triangulation that refills it.

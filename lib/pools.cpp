@@ -31,6 +31,7 @@ namespace detail {
 OpContext::OpContext(std::uint32_t id_, bool locking_)
     : id(id_), locking(locking_), rng(0x9E3779B97F4A7C15ull ^ mix64(id_)) {
   new_cell_by_edge.reserve_for(64);
+  cone_edge.resize(std::size_t{cone_ids} * cone_ids);
   small_id.reserve_for(64);
   held_shared.reserve(64);
   held_exclusive.reserve(64);
@@ -40,9 +41,9 @@ OpContext::~OpContext() = default;
 }  // namespace detail
 
 Triangulation::Impl::Impl(bool small_triangulation)
-    : cells(small_triangulation ? max_small_cells : max_cells),
-      tags(small_triangulation ? max_small_cells : max_cells),
-      verts(small_triangulation ? max_small_vertices : max_vertices),
+    : cells(small_triangulation ? max_small_cells : max_cells, !small_triangulation),
+      tags(small_triangulation ? max_small_cells : max_cells, !small_triangulation),
+      verts(small_triangulation ? max_small_vertices : max_vertices, !small_triangulation),
       is_small(small_triangulation),
       seq(std::make_unique<OpContext>(1, false)) {
   verts.grow(1);  // vertex 0: the infinite vertex

@@ -36,6 +36,11 @@ struct VertexRec {
   // 0 free, k > 0 held shared by k readers, -(owner) held exclusively by the
   // context whose id is owner (vertex_locks.cpp).
   std::atomic<std::int32_t> lock{0};
+  // Scratch of the one operation that holds this vertex exclusively (the
+  // sequential context holds everything): cone_from_vertex numbers the
+  // boundary's vertices here. Meaningless between operations; it fills what
+  // would be padding, so the record stays 48 bytes.
+  std::uint32_t scratch = 0;
   // Unique per vertex incarnation; 0 when free. Atomic so that a thread
   // submitting a removal can read it without a lock: it is stored (release)
   // after p on allocation, cleared on release.

@@ -244,6 +244,7 @@ struct Triangulation::Impl {
   // Marks are cleared before it returns, whatever it returns.
   OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0);
   void cone_from_vertex(OpContext& ctx, VertexId v);
+  void link_cone(OpContext& ctx);  // the cone's internal adjacencies (boundary[i].outer = new cell)
 
   // -- removal (removal.cpp) ------------------------------------------------------
   // expected_stamp: 0 = any; else the vertex must be that incarnation.

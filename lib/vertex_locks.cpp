@@ -22,8 +22,12 @@ bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
   std::atomic<std::int32_t>& w = verts[v].lock;
   std::int32_t cur = w.load(std::memory_order_relaxed);
   if (cur == -static_cast<std::int32_t>(ctx.id)) return true;
-  for (VertexId h : ctx.held_shared)
-    if (h == v) return true;
+  if (cur < 0) return false;  // another context's
+  // Our own shares count in the word: with none there, we hold none (our
+  // own increments are visible to us), and the list need not be searched.
+  if (cur > 0)
+    for (VertexId h : ctx.held_shared)
+      if (h == v) return true;
   if (ctx.held_shared.size() == ctx.held_shared.capacity()) {
     PDT_FAULT_POINT("lock record");
     ctx.held_shared.reserve(2 * ctx.held_shared.capacity() + 16);
@@ -42,12 +46,16 @@ bool Triangulation::Impl::lock_exclusive(OpContext& ctx, VertexId v) {
   const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
   std::int32_t cur = w.load(std::memory_order_relaxed);
   if (cur == mine) return true;
+  if (cur < 0 || cur > 1) return false;  // another's, or another reader's (perhaps beside us)
   if (ctx.held_exclusive.size() == ctx.held_exclusive.capacity()) {
     PDT_FAULT_POINT("lock record");
     ctx.held_exclusive.reserve(2 * ctx.held_exclusive.capacity() + 16);
   }
-  auto it = std::find(ctx.held_shared.begin(), ctx.held_shared.end(), v);
-  std::int32_t expect = it != ctx.held_shared.end() ? 1 : 0;  // upgrade: we must be the only reader
+  // An upgrade when the one reader is us (searched only when there is one:
+  // with the word at 0 we hold no share).
+  auto it = cur == 1 ? std::find(ctx.held_shared.begin(), ctx.held_shared.end(), v) : ctx.held_shared.end();
+  if (cur == 1 && it == ctx.held_shared.end()) return false;
+  std::int32_t expect = cur;
   if (!w.compare_exchange_strong(expect, mine, std::memory_order_acquire, std::memory_order_relaxed)) return false;
   if (it != ctx.held_shared.end()) {
     *it = ctx.held_shared.back();

@@ -115,6 +115,28 @@ TEST_CASE("insertion of exactly cospherical points", "[insert][degenerate]") {
   }
 }
 
+TEST_CASE("cavities larger than the cone's edge table", "[insert][degenerate]") {
+  // The cone over a cavity boundary of at most 63 finite vertices is linked
+  // through a directed-edge table, larger ones through a hash map. The centre
+  // of exactly cospherical points has them all on its cavity's boundary.
+  std::vector<Point3> pts = cospherical(2025);
+  REQUIRE(pts.size() > 64);
+  pdt::Triangulation t;
+  insert_all(t, pts);
+  const std::uint64_t before = t.stats().cells_created_by_insert;
+  t.insert({0, 0, 0});
+  // A triangulated sphere with k vertices has 2k - 4 triangles: one new cell each.
+  REQUIRE(t.stats().cells_created_by_insert - before >= 2 * pts.size() - 4);
+  pts.push_back({0, 0, 0});
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+  // and an ordinary insertion next to it, back on the table
+  t.insert({1, 2, 3});
+  pts.push_back({1, 2, 3});
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
 TEST_CASE("coplanar start, then points off the plane", "[insert][degenerate]") {
   std::vector<Point3> plane;
   for (int x = 0; x < 20; ++x)

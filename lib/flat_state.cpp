@@ -5,7 +5,7 @@
 // A removal that leaves a coplanar set drops back here. Single-threaded only:
 // the engine runs these with the world stopped.
 #include <algorithm>
-#include <array>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 
@@ -15,22 +15,10 @@
 
 namespace pdt {
 
-using detail::facet_vertex;
 using detail::KPoint;
 using detail::OpContext;
 using detail::OpStatus;
 using detail::orient;
-
-namespace {
-
-// The vertex set of a facet, sorted: equal for the two cells sharing it.
-std::array<VertexId, 3> facet_key(VertexId a, VertexId b, VertexId c) {
-  std::array<VertexId, 3> k{a, b, c};
-  std::sort(k.begin(), k.end());
-  return k;
-}
-
-}  // namespace
 
 InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
   if (VertexId w = find_flat(p); w != no_vertex) {
@@ -97,7 +85,7 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
   std::vector<VertexId> rest;
   try {
     PDT_FAULT_POINT("first tetrahedron");
-    rest.reserve(flat.size());
+    if (flat.size() > 3) rest.reserve(flat.size() - 3);  // the basis is listed; the apex is not
     VertexId t[4] = {basis[0], basis[1], basis[2], apex};
     if (orient(pt(t[0]), pt(t[1]), pt(t[2]), pt(t[3])) < 0) std::swap(t[0], t[1]);
     reserve_cells(ctx, 5);
@@ -113,58 +101,64 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
       std::swap(u[(i + 1) & 3], u[(i + 2) & 3]);
       std::memcpy(cells[all[i + 1]].v, u, sizeof u);
     }
-    // Link by matching facets (5 cells: quadratic is fine).
+    // Each of the 5 cells is {t0..t3, infinite} less one vertex (cell 0 lacks
+    // the infinite one, cell i + 1 lacks t[i]), so any two share the facet
+    // without both missing vertices: in cell a it faces b's missing vertex.
+    const VertexId missing[5] = {0, t[0], t[1], t[2], t[3]};
     for (int a = 0; a < 5; ++a)
-      for (int fa = 0; fa < 4; ++fa)
-        for (int b = a + 1; b < 5; ++b)
-          for (int fb = 0; fb < 4; ++fb) {
-            const VertexId* va = cells[all[a]].v;
-            const VertexId* vb = cells[all[b]].v;
-            if (facet_key(va[facet_vertex[fa][0]], va[facet_vertex[fa][1]], va[facet_vertex[fa][2]]) ==
-                facet_key(vb[facet_vertex[fb][0]], vb[facet_vertex[fb][1]], vb[facet_vertex[fb][2]]))
-              set_adjacency(all[a], fa, all[b], fb);
-          }
+      for (int b = a + 1; b < 5; ++b)
+        set_adjacency(all[a], index_of(all[a], missing[b]), all[b], index_of(all[b], missing[a]));
     for (int i = 0; i < 4; ++i) verts[t[i]].cell = all[0];
     dim.store(3, std::memory_order_release);
+    std::size_t live_cells = 5;
     for (VertexId v : flat)
       if (v != t[0] && v != t[1] && v != t[2]) rest.push_back(v);
+    grid = detail::JumpGrid{};  // it names no vertex of the new cells yet
     // Insert the rest in Morton order, each walk starting from the previous
     // vertex: short walks without the jump grid, which must not name a vertex
-    // before it is in the triangulation.
-    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    for (VertexId v : rest) {
-      const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
-    }
-    const detail::BoxLattice lattice(lo, hi, 1024);
-    auto morton = [&](VertexId v) {
-      const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-      std::uint64_t key = 0;
-      for (int a = 0; a < 3; ++a) {
-        const auto q = static_cast<std::uint64_t>(lattice.index(a, c[a]));
-        for (int b = 0; b < 10; ++b) key |= ((q >> b) & 1u) << (3 * b + a);
+    // before it is in the triangulation. Usually there is no rest (the 4th
+    // point raised the dimension): nothing to sort, nothing to allocate.
+    if (!rest.empty()) {
+      double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+      for (VertexId v : rest) {
+        const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
       }
-      return key;
-    };
-    std::vector<std::pair<std::uint64_t, VertexId>> order;
-    order.reserve(rest.size());
-    for (VertexId v : rest) order.emplace_back(morton(v), v);
-    std::sort(order.begin(), order.end());
-    grid = detail::JumpGrid{};
-    VertexId prev = apex;
-    for (auto [key, v] : order) {
-      bool outside = false;
-      CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
-      gather_conflict_zone(ctx, pt(v), c);
-      reserve_cells(ctx, ctx.boundary.size());
-      PDT_FAULT_POINT("edge map");
-      ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
-      cone_from_vertex(ctx, v);
-      prev = v;
+      const detail::BoxLattice lattice(lo, hi, 1024);
+      auto morton = [&](VertexId v) {
+        const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
+        std::uint64_t key = 0;
+        for (int a = 0; a < 3; ++a) {
+          const auto q = static_cast<std::uint64_t>(lattice.index(a, c[a]));
+          for (int b = 0; b < 10; ++b) key |= ((q >> b) & 1u) << (3 * b + a);
+        }
+        return key;
+      };
+      std::vector<std::pair<std::uint64_t, VertexId>> order;
+      order.reserve(rest.size());
+      for (VertexId v : rest) order.emplace_back(morton(v), v);
+      std::sort(order.begin(), order.end());
+      VertexId prev = apex;
+      for (auto [key, v] : order) {
+        bool outside = false;
+        CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
+        gather_conflict_zone(ctx, pt(v), c);
+        reserve_cells(ctx, ctx.boundary.size());
+        PDT_FAULT_POINT("edge map");
+        ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
+        live_cells += ctx.boundary.size() - ctx.conflict_zone.size();
+        cone_from_vertex(ctx, v);
+        prev = v;
+      }
     }
     // What the hook hears: every cell now live, made by this one insertion.
-    std::size_t live_cells = 0;
-    for (CellId c = 0; c < cells.size(); ++c) live_cells += cell_alive(c);
+    // Counted as they were made: a removal's small triangulation holds a
+    // whole chunk of cell ids, which a scan would visit on every removal.
+    assert([&] {
+      std::size_t live = 0;
+      for (CellId c = 0; c < cells.size(); ++c) live += cell_alive(c);
+      return live == live_cells;
+    }());
     begin_report(ctx, live_cells, 0);
   } catch (...) {
     // Back to the flat state: no cell, the flat vertices' positions restored.
@@ -184,10 +178,15 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
   flat_index.clear();
   basis.clear();
   fold_counters(ctx);
-  try {
-    grid_rebuild();
-  } catch (const std::bad_alloc&) {
-    grid = detail::JumpGrid{};  // walks start elsewhere; the next growth retries
+  // A removal's small triangulation walks from the vertex it inserted last
+  // and never grows a grid (grid_note); it is rebuilt per removal, so a grid
+  // here would be an allocation per removal.
+  if (!is_small) {
+    try {
+      grid_rebuild();
+    } catch (const std::bad_alloc&) {
+      grid = detail::JumpGrid{};  // walks start elsewhere; the next growth retries
+    }
   }
   ctx.last_vertex = apex;
   recent_vertex.store(apex, std::memory_order_relaxed);

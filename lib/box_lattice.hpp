@@ -32,6 +32,12 @@ struct BoxLattice {
     const double t = (0.5 * c - half_lo[a]) * scale[a];
     return !(t > 0) ? 0 : t >= res - 1 ? res - 1 : static_cast<int>(t);
   }
+  // Where c lies along axis a in units of cells, clamped to [0, res]: its
+  // integer part is index(a, c) except at the far end (res, in cell res - 1).
+  double position(int a, double c) const {
+    const double t = (0.5 * c - half_lo[a]) * scale[a];
+    return !(t > 0) ? 0.0 : t < res ? t : static_cast<double>(res);
+  }
 };
 
 }  // namespace pdt::detail

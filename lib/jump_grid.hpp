@@ -1,17 +1,37 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Jump-and-walk start (paper §2.1, Mücke et al.), structured: a uniform grid
-// over the live vertices' bounding box remembers, per slot, the last vertex
-// inserted there. Locating p starts at the vertex of p's slot (or the nearest
-// filled slot), so walks stay short.
+// Jump-and-walk start (paper §2.1, Mücke et al.), structured: a grid over
+// the live vertices' bounding box remembers, per slot, the last vertex
+// inserted there. Locating p starts at the vertex of p's slot (or of a filled
+// slot near it), so walks stay short.
+//
+// The grid is a tree of grids so that it follows where the vertices are: the
+// box is cut into res^3 equal nodes, and a node holding many vertices is cut
+// again, k^3 ways, until a node (a leaf) holds few; a leaf is cut into k^3
+// slots of about `per_slot` vertices each, chosen when the grid is built. A
+// uniform grid would give a point set that fills a small part of its box (a
+// scanned surface, points near a line) tens of vertices per slot where they
+// are, and walks that many cells longer. For uniform points the tree is two
+// levels: the root's grid, and leaves of 2 x 2 x 2 slots.
+//
+// Encoding: nodes[i] = {first, k | leaf_bit}: an inner node's children are
+// nodes [first, first + k^3), a leaf's slots are slots [first, first + k^3);
+// child or slot (x, y, z) of a node is at first + (z * k + y) * k + x. Node 0
+// is the root, cut res x res x res by `lattice` over the bounding box.
+// Invariant (checked in debug builds by build): k >= 1; every node but the
+// root is the child of exactly one inner node; the leaves' slot ranges tile
+// [0, slot_count); depth <= max_depth.
 //
 // Slots are relaxed atomics: a slot may name a vertex that has since died or
 // been recycled, so a reader checks the vertex (under its lock, in the engine)
-// before using it. Who regrows the grid: the kernel, each time the vertex
-// count doubles, unless an engine drives the triangulation (then the engine
-// does, with the world stopped; see Triangulation::Impl::grid_growth).
+// before using it. The tree itself never changes after build. Who regrows
+// the grid: the kernel, each time the vertex count doubles, unless an engine
+// drives the triangulation (then the engine does, with the world stopped; see
+// Triangulation::Impl::grid_growth).
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 
 #include "box_lattice.hpp"
@@ -21,26 +41,85 @@
 namespace pdt::detail {
 
 struct JumpGrid {
-  BoxLattice lattice;  // res^3 slots over the vertices' bounding box
+  static constexpr std::uint32_t leaf_bit = 0x80000000u;
+  static constexpr int max_depth = 12;
+  struct Node {
+    std::uint32_t first;
+    std::uint32_t k_leaf;  // k | leaf_bit for a leaf
+    std::uint32_t k() const { return k_leaf & ~leaf_bit; }
+    bool leaf() const { return (k_leaf & leaf_bit) != 0; }
+  };
+  BoxLattice lattice;  // the root's res^3 children over the vertices' bounding box
+  std::unique_ptr<Node[]> nodes;
   std::unique_ptr<std::atomic<VertexId>[]> slots;
+  std::size_t node_count = 0;
   std::size_t slot_count = 0;  // 0: no grid
   std::size_t built_for = 0;   // live vertices when it was built
 
+  // The cell of a k^3 grid that holds fraction f in [0, 1] along an axis, and
+  // f's fraction within that cell.
+  static int sub_index(double& f, std::uint32_t k) {
+    const double t = f * k;
+    const int i = std::min(static_cast<int>(t), static_cast<int>(k) - 1);
+    f = std::min(std::max(t - i, 0.0), 1.0);
+    return i;
+  }
+  // The path from the root to p's slot: node[d] and p's cell in it, cell[d],
+  // for d < depth; node[depth - 1] is a leaf, and its cell is the slot.
+  struct Path {
+    std::uint32_t node[max_depth + 1];
+    int cell[max_depth + 1][3];
+    int depth = 0;
+  };
+  void path_of(const KPoint& p, Path& path) const {
+    const double c[3] = {p.x(), p.y(), p.z()};
+    double f[3];
+    for (int a = 0; a < 3; ++a) f[a] = lattice.position(a, c[a]) / lattice.res;
+    std::uint32_t n = 0;
+    path.depth = 0;
+    while (true) {
+      const Node& node = nodes[n];
+      const std::uint32_t k = node.k();
+      int* cell = path.cell[path.depth];
+      for (int a = 0; a < 3; ++a) cell[a] = sub_index(f[a], k);
+      path.node[path.depth++] = n;
+      const std::uint32_t next = node.first + (static_cast<std::uint32_t>(cell[2]) * k + cell[1]) * k + cell[0];
+      if (node.leaf()) return;
+      n = next;
+    }
+  }
   std::size_t slot_of(const KPoint& p) const {
-    const int res = lattice.res;
-    return (static_cast<std::size_t>(lattice.index(2, p.z())) * res + lattice.index(1, p.y())) * res +
-           lattice.index(0, p.x());
+    const double c[3] = {p.x(), p.y(), p.z()};
+    double f[3];
+    for (int a = 0; a < 3; ++a) f[a] = lattice.position(a, c[a]) / lattice.res;
+    std::uint32_t n = 0;
+    while (true) {
+      const Node& node = nodes[n];
+      const std::uint32_t k = node.k();
+      const int x = sub_index(f[0], k), y = sub_index(f[1], k), z = sub_index(f[2], k);
+      const std::uint32_t next = node.first + (static_cast<std::uint32_t>(z) * k + y) * k + x;
+      if (node.leaf()) return next;
+      n = next;
+    }
   }
   VertexId get(std::size_t s) const { return slots[s].load(std::memory_order_relaxed); }
   void set(std::size_t s, VertexId v) { slots[s].store(v, std::memory_order_relaxed); }
   // The vertex of p's slot, else of the nearest filled slot within two shells
-  // around it; no_vertex if none.
+  // around it in its leaf, else of a filled slot in the nodes around p's
+  // path, from the leaf up; no_vertex if none.
   VertexId lookup(const KPoint& p) const;
 
-  // A grid over the live vertices of verts (ids 1..), with about `slots`
-  // slots when given, else about 2 vertices per slot. Counts the vertices
-  // itself (the triangulation's totals lag while engine workers hold deltas).
+  // A grid over the live vertices of verts (ids 1..), with at most `slots`
+  // slots when given (and about that many when the vertices are spread
+  // evenly), else about 2 vertices per slot. Counts the vertices itself (the
+  // triangulation's totals lag while engine workers hold deltas).
   static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0);
+  // Bytes it holds.
+  std::size_t bytes() const { return slot_count * sizeof(VertexId) + node_count * sizeof(Node); }
+
+ private:
+  // A filled slot of node n's subtree, reading at most `budget` slots.
+  VertexId any_in(std::uint32_t n, int& budget) const;
 };
 
 }  // namespace pdt::detail

@@ -208,7 +208,7 @@ const TriangulationStats& Triangulation::stats() const { return impl_->seq->stat
 std::size_t Triangulation::memory_bytes() const {
   const Impl& m = *impl_;
   return m.cells.size() * (sizeof(detail::CellRec) + sizeof(std::uint32_t)) +  // records and tags
-         m.verts.size() * sizeof(detail::VertexRec) + m.grid.slot_count * sizeof(VertexId);
+         m.verts.size() * sizeof(detail::VertexRec) + m.grid.bytes();
 }
 
 }  // namespace pdt

@@ -17,6 +17,7 @@
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
+#include "triangulation_impl.hpp"  // the jump-grid test reads the grid
 
 using namespace pdt_test;
 using pdt::Point3;
@@ -707,6 +708,38 @@ TEST_CASE("hints do not change the result", "[insert][hint]") {
       require_valid(*t);
       REQUIRE((canonical_tets(*t, pts) == ref.tets));
     }
+  }
+}
+
+TEST_CASE("the jump grid follows where the vertices are", "[insert][locate]") {
+  // A walk starts from the vertex of the point's grid slot, so its length
+  // grows with the vertices between that vertex and the point. A uniform grid
+  // over the bounding box gives points near a line, or on a surface, tens of
+  // vertices per slot where they are (walks of 13 to 21 steps on the scans in
+  // ../shared/data); the tree of grids keeps about two per slot.
+  for (pdt::Distribution d : {pdt::Distribution::uniform, pdt::Distribution::line, pdt::Distribution::sphere}) {
+    INFO("distribution " << pdt::to_string(d));
+    const std::vector<Point3> pts = generated_points(d, 40000, 12);
+    pdt::Triangulation t;
+    for (const Point3& p : pts) t.insert(p);
+    const auto& m = pdt::detail::impl_of(t);
+    REQUIRE(m.grid.slot_count > 0);
+    REQUIRE(m.grid.slot_count <= t.number_of_vertices());
+    std::map<std::size_t, std::size_t> in_slot;
+    for (pdt::VertexId v = 1; v < t.vertex_id_bound(); ++v)
+      if (t.is_vertex(v)) ++in_slot[m.grid.slot_of(m.verts[v].p)];
+    // The mean, over vertices, of the vertices in the same slot.
+    double sharing = 0;
+    for (const auto& [slot, count] : in_slot) sharing += static_cast<double>(count) * static_cast<double>(count);
+    sharing /= static_cast<double>(t.number_of_vertices());
+    const double steps = static_cast<double>(t.stats().walk_steps) / static_cast<double>(pts.size());
+    INFO("vertices per slot, seen from a vertex: " << sharing << "; slots " << m.grid.slot_count
+                                                   << "; walk steps per insertion " << steps);
+    // A uniform grid: 3.5, 208 and 20 vertices per slot, walks of 6, 15 and
+    // 127 steps. Points on a sphere make cells that span the ball, so their
+    // walks stay long whatever the start.
+    REQUIRE(sharing < 8);
+    if (d != pdt::Distribution::sphere) REQUIRE(steps < 10);
   }
 }
 

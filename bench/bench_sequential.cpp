@@ -4,21 +4,29 @@
 // points, same order, same run.
 //
 //   bench_sequential [--points N] [--dists uniform,normal,line] [--remove-fraction F] [--seed S]
+//                    [--inputs FILE,FILE...]
 //
 // Per distribution: N points from pdt::generate, inserted one at a time in the
-// generated (random) order with no spatial sort; then the first F*N insertions
+// generated (random) order with no spatial sort; per input file (--inputs,
+// any format pdt::read_points reads, e.g. the scans in ../shared/data): its
+// distinct points in a random order (seeded), which is how a refiner's
+// points arrive, not the scanner's order. Then the first F*N insertions
 // are undone one at a time. pdt runs first and is freed before CGAL runs, so
 // the resident-memory deltas (VmRSS from /proc/self/status) are measured
 // separately. The two final triangulations must have the same number of finite
 // cells (MISMATCH is printed otherwise).
 // Then batch mode: Triangulation::insert_batch(all) against CGAL's
 // insert(first, last), both spatially sorting the batch inside the timing.
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "common/bench_util.hpp"
 #include "common/cgal_runners.hpp"
+#include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
 #include "support/sys_info.hpp"
 
@@ -33,7 +41,7 @@ struct Row {
   std::string dist;
   std::size_t n = 0, removed = 0;
   double pdt_insert = 0, pdt_remove = 0;
-  double created_per_insert = 0, touched_per_remove = 0;
+  double created_per_insert = 0, touched_per_remove = 0, walk_per_insert = 0;
   double pdt_bytes_per_tet = 0;
   double pdt_rss_insert = 0, pdt_rss_remove = 0;
   std::size_t pdt_cells_after_insert = 0, pdt_finite = 0, pdt_vertices = 0;
@@ -43,10 +51,9 @@ struct Row {
   std::size_t pdt_batch_cells = 0, cgal_batch_cells = 0;
 };
 
-Row run_one(std::uint64_t n, double remove_fraction, std::uint64_t seed, pdt::Distribution dist) {
+Row run_one(const std::string& name, const std::vector<pdt::Point3>& pts, double remove_fraction) {
   Row row;
-  row.dist = pdt::to_string(dist);
-  const std::vector<pdt::Point3> pts = generated_points(dist, n, seed).points;
+  row.dist = name;
   row.n = pts.size();
   const std::size_t n_remove = static_cast<std::size_t>(remove_fraction * double(pts.size()));
   row.removed = n_remove;
@@ -73,6 +80,7 @@ Row run_one(std::uint64_t n, double remove_fraction, std::uint64_t seed, pdt::Di
 
     const auto& st = t.stats();
     row.created_per_insert = st0.insertions ? double(st0.cells_created_by_insert) / double(st0.insertions) : 0;
+    row.walk_per_insert = st0.insertions ? double(st0.walk_steps) / double(st0.insertions) : 0;
     const std::uint64_t removals = st.removals - st0.removals;
     row.touched_per_remove =
         removals ? double(st.cells_touched_by_remove - st0.cells_touched_by_remove) / double(removals) : 0;
@@ -100,7 +108,7 @@ Row run_one(std::uint64_t n, double remove_fraction, std::uint64_t seed, pdt::Di
 
 int main(int argc, char** argv) {
   std::uint64_t points = 1000000, seed = 1;
-  std::vector<std::string> dist_names{"uniform", "normal", "line"};
+  std::vector<std::string> dist_names{"uniform", "normal", "line"}, inputs;
   double remove_fraction = 0.1;
   ArgParser args(argv[0], "pdt's sequential kernel against CGAL's Delaunay_triangulation_3, one point at a time, "
                           "then in batch mode");
@@ -109,32 +117,60 @@ int main(int argc, char** argv) {
   args.real("--remove-fraction", "fraction of the insertions undone afterwards, first inserted first (default 0.1)",
             remove_fraction, 0, 1);
   args.count("--seed", "generator seed (default 1)", seed);
+  args.list("--inputs", "comma-separated point files, run after the distributions (their distinct points, shuffled)",
+            inputs);
   args.parse(argc, argv);
   const std::vector<pdt::Distribution> dists = distributions(dist_names);
+  // Every input read before anything runs: a bad file fails at once.
+  std::vector<std::pair<std::string, std::vector<pdt::Point3>>> input_sets;
+  for (const std::string& path : inputs) {
+    std::vector<pdt::Point3> pts;
+    try {
+      pts = pdt::read_points(path);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "bench_sequential: --inputs: %s\n", e.what());
+      return 2;
+    }
+    // Distinct points only: CGAL's remove(vh) drops a vertex whatever its
+    // multiplicity, pdt's remove lowers the multiplicity first.
+    auto key = [](const pdt::Point3& p) { return std::tuple(p.x, p.y, p.z); };
+    std::sort(pts.begin(), pts.end(), [&](const pdt::Point3& a, const pdt::Point3& b) { return key(a) < key(b); });
+    pts.erase(std::unique(pts.begin(), pts.end(), [&](const pdt::Point3& a, const pdt::Point3& b) { return key(a) == key(b); }),
+              pts.end());
+    std::shuffle(pts.begin(), pts.end(), std::mt19937_64(seed));
+    input_sets.emplace_back(std::filesystem::path(path).filename().string(), std::move(pts));
+  }
 
   std::printf("bench_sequential: %llu points, remove fraction %g, seed %llu; one point at a time, no spatial sort\n",
               static_cast<unsigned long long>(points), remove_fraction, static_cast<unsigned long long>(seed));
   std::printf("CGAL: Delaunay_triangulation_3<Epick, Default, Fast_location>, insert(p) / remove(vh)\n\n");
-  std::printf("%-8s %9s | %9s %9s %6s | %8s %9s %9s %6s | %8s %8s | %8s %9s %9s %9s %9s | %s\n", "dist", "N",
-              "pdt ins s", "CGAL ins", "ratio", "removed", "pdt rem s", "CGAL rem", "ratio", "created/", "touched/",
-              "pdt B/", "pdt RSS", "pdt RSS", "CGAL RSS", "CGAL RSS", "finite cells");
-  std::printf("%-8s %9s | %9s %9s %6s | %8s %9s %9s %6s | %8s %8s | %8s %9s %9s %9s %9s | %s\n", "", "", "", "s",
-              "", "", "", "s", "", "insert", "remove", "tet", "ins MiB", "rem MiB", "ins MiB", "rem MiB",
+  std::printf("%-8s %9s | %9s %9s %6s | %8s %9s %9s %6s | %8s %8s %6s | %8s %9s %9s %9s %9s | %s\n", "dist",
+              "N", "pdt ins s", "CGAL ins", "ratio", "removed", "pdt rem s", "CGAL rem", "ratio", "created/",
+              "touched/", "walk/", "pdt B/", "pdt RSS", "pdt RSS", "CGAL RSS", "CGAL RSS", "finite cells");
+  std::printf("%-8s %9s | %9s %9s %6s | %8s %9s %9s %6s | %8s %8s %6s | %8s %9s %9s %9s %9s | %s\n", "", "", "",
+              "s", "", "", "", "s", "", "insert", "remove", "insert", "tet", "ins MiB", "rem MiB", "ins MiB", "rem MiB",
               "pdt / CGAL");
   int mismatches = 0;
   std::vector<Row> rows;
-  for (pdt::Distribution d : dists) {
-    const Row& r = rows.emplace_back(run_one(points, remove_fraction, seed, d));
+  std::vector<std::pair<std::string, std::vector<pdt::Point3>>> sets;
+  for (pdt::Distribution d : dists) sets.emplace_back(pdt::to_string(d), std::vector<pdt::Point3>{});
+  for (auto& set : input_sets) sets.push_back(std::move(set));
+  for (std::size_t i = 0; i < sets.size(); ++i) {
+    // A distribution's points are generated only when its turn comes.
+    if (i < dists.size()) sets[i].second = generated_points(dists[i], points, seed).points;
+    const Row& r = rows.emplace_back(run_one(sets[i].first, sets[i].second, remove_fraction));
+    sets[i].second = {};
     const CgalRun& c = r.cgal;
     const bool same = r.pdt_finite == c.shape.finite_cells && r.pdt_vertices == c.shape.vertices &&
                       r.pdt_cells_after_insert == c.cells_after_insert_all && r.pdt_batch_cells == r.cgal_batch_cells;
     mismatches += !same;
     std::printf(
-        "%-8s %9zu | %9.3f %9.3f %6.2f | %8zu %9.3f %9.3f %6.2f | %8.2f %8.2f | %8.1f %9.1f %9.1f %9.1f %9.1f | "
+        "%-8s %9zu | %9.3f %9.3f %6.2f | %8zu %9.3f %9.3f %6.2f | %8.2f %8.2f %6.2f | %8.1f %9.1f %9.1f %9.1f %9.1f | "
         "%zu / %zu%s\n",
         r.dist.c_str(), r.n, r.pdt_insert, c.insert_seconds,
         c.insert_seconds > 0 ? r.pdt_insert / c.insert_seconds : 0.0, r.removed, r.pdt_remove, c.remove_seconds,
         c.remove_seconds > 0 ? r.pdt_remove / c.remove_seconds : 0.0, r.created_per_insert, r.touched_per_remove,
+        r.walk_per_insert,
         r.pdt_bytes_per_tet, mib(r.pdt_rss_insert), mib(r.pdt_rss_remove), mib(c.rss_insert), mib(c.rss_remove),
         r.pdt_finite, c.shape.finite_cells, same ? "" : "  MISMATCH");
     if (!same)

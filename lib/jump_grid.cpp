@@ -85,14 +85,15 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
   StableArray<Node> nodes(max_nodes);
   StableArray<Pending> queue(max_nodes);
   std::vector<std::uint32_t> offsets;
+  ids.grow(bound, false);
+  std::size_t n = 0;
   for (VertexId v = 1; v < bound; ++v) {
     if (verts[v].multiplicity == 0) continue;
-    ids[ids.grow(1, false)] = v;
+    ids[n++] = v;
     const KPoint& p = verts[v].p;
     const double c[3] = {p.x(), p.y(), p.z()};
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
   }
-  const std::size_t n = ids.size();
   const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);
   // About `per_slot` vertices per slot, 2 unless the cap asks for more: few
   // slots are empty right after a build. Raised until the slots fit the cap.
@@ -100,14 +101,19 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
   ids2.grow(n, false);
   child.grow(n, false);
   for (int attempt = 0;; ++attempt) {
-    // A node holding at most 8 * per_slot vertices is a leaf of 1 or 8
-    // slots; an inner node is cut so that its children hold about that many.
+    // A node holding at most 16 * per_slot vertices is a leaf of 1, 8 or 27
+    // slots; an inner node is cut so that its children hold about 8 *
+    // per_slot. So for evenly spread vertices the root's children are leaves
+    // (one pass over the vertices), and only a node twice as dense as its
+    // surroundings is cut again. (A threshold of 8 * per_slot cut half the
+    // uniform case's nodes again, and built 2.4x slower; 27 * per_slot gave
+    // surfaces a third more vertices per slot.)
     const bool last = attempt == 8;  // then one slot: always fits
     auto leaf_k = [&](std::size_t c) {
       return last ? 1.0 : std::max(1.0, std::round(std::cbrt(static_cast<double>(c) / per_slot)));
     };
     auto is_leaf = [&](std::size_t c, int depth) {
-      return last || static_cast<double>(c) <= 8 * per_slot || depth == max_depth - 1;
+      return last || static_cast<double>(c) <= 16 * per_slot || depth == max_depth - 1;
     };
     auto inner_k = [&](std::size_t c) {
       return std::clamp(std::round(std::cbrt(static_cast<double>(c) / (8 * per_slot))), 2.0, 1024.0);
@@ -141,13 +147,13 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
       // rescaling; where rounding differs, a vertex is counted in a
       // neighbouring child, which only shifts the counts.
       offsets.assign(cells + 1, 0);
-      const double child_size = at.size / k;
+      const double child_size = at.size / k, to_child = 1.0 / child_size, to_unit = 1.0 / g.lattice.res;
       for (std::size_t i = at.begin; i < at.end; ++i) {
         const KPoint& p = verts[ids[i]].p;
         const double c[3] = {p.x(), p.y(), p.z()};
         std::uint32_t xyz[3];
         for (int a = 0; a < 3; ++a) {
-          const double f = (g.lattice.position(a, c[a]) / g.lattice.res - at.origin[a]) / child_size;
+          const double f = (g.lattice.position(a, c[a]) * to_unit - at.origin[a]) * to_child;
           xyz[a] = static_cast<std::uint32_t>(std::clamp(f, 0.0, static_cast<double>(k - 1)));
         }
         child[i] = (xyz[2] * k + xyz[1]) * k + xyz[0];

@@ -67,7 +67,7 @@ VertexId JumpGrid::lookup(const KPoint& p) const {
   return no_vertex;
 }
 
-JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {
+JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, bool follow_vertices) {
   double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
@@ -119,8 +119,12 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
       return std::clamp(std::round(std::cbrt(static_cast<double>(c) / (8 * per_slot))), 2.0, 1024.0);
     };
     JumpGrid g;
-    const bool root_leaf = is_leaf(n, 0);
-    g.lattice = BoxLattice(lo, hi, static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
+    // Not following the vertices: the root is the only node, a leaf of about
+    // `want` equal slots.
+    const bool root_leaf = !follow_vertices || is_leaf(n, 0);
+    g.lattice = BoxLattice(lo, hi,
+                           !follow_vertices ? std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want))))
+                                            : static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
     // Breadth first, so that a node's children are consecutive; queue[i]
     // describes node i.
     nodes.clear(false);

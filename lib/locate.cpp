@@ -288,8 +288,10 @@ OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* aliv
 }
 
 void Triangulation::Impl::grid_rebuild(std::size_t slots) {
-  // Built aside and moved in: an allocation failure leaves the old grid.
-  grid = detail::JumpGrid::build(verts, slots);
+  // Built aside and moved in: an allocation failure leaves the old grid. A
+  // tree that follows the vertices for the kernel; equal slots for an
+  // engine, whose vertices at a rebuild are those of the blocks done so far.
+  grid = detail::JumpGrid::build(verts, slots, grid_growth == GridGrowth::kernel);
 }
 
 }  // namespace pdt

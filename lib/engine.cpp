@@ -132,14 +132,13 @@ OpRecord* EngineState::make_remove(VertexHandle v) {
   // Where it is: read under a shared lock if free; if a worker holds it right
   // now, the worker that pops the removal reads it.
   std::uint64_t now = 0;
-  if (try_read_vertex(impl, v.id, op->stamp, &op->point, &now)) return op;
-  if (impl.verts[v.id].lock.load(std::memory_order_relaxed) < 0) {
-    op->routed = false;  // held by a worker right now: the worker that pops it reads it
-    return op;
+  switch (read_vertex(impl, v.id, op->stamp, &op->point, &now)) {
+    case VertexRead::read: return op;
+    case VertexRead::held: op->routed = false; return op;  // the worker that pops it reads it
+    case VertexRead::dead: break;
   }
   records.release(op);
   throw dead();
-  return op;
 }
 
 void EngineState::submit(OpRecord* op, std::uint32_t count) {

@@ -70,21 +70,31 @@ namespace pdt::detail {
 
 // Reads a live vertex's point from any thread, without a context: one shared
 // lock, taken only if free (a writer holds it exclusively while it changes
-// the vertex). False if it is held exclusively right now, or is not a live
-// vertex of the expected incarnation (0: any).
-inline bool try_read_vertex(const Triangulation::Impl& m, VertexId v, std::uint64_t expected, Point3* p,
-                            std::uint64_t* stamp) {
+// the vertex). The answer is one observation of the lock word: `held` if a
+// writer held it exclusively when looked at, else the shared lock was taken
+// and the vertex read under it, `read` if it is a live vertex of the expected
+// incarnation (0: any) and `dead` if not. (Checking "held?" again after a
+// failed read would race: the writer may have let go in between.)
+enum class VertexRead { read, held, dead };
+inline VertexRead read_vertex(const Triangulation::Impl& m, VertexId v, std::uint64_t expected, Point3* p,
+                              std::uint64_t* stamp) {
   std::atomic<std::int32_t>& lock = const_cast<Triangulation::Impl&>(m).verts[v].lock;
   std::int32_t cur = lock.load(std::memory_order_relaxed);
   do {
-    if (cur < 0) return false;
+    if (cur < 0) return VertexRead::held;
   } while (!lock.compare_exchange_weak(cur, cur + 1, std::memory_order_acquire, std::memory_order_relaxed));
   const VertexRec& r = m.verts[v];
   *stamp = r.stamp.load(std::memory_order_relaxed);
   const bool ok = r.multiplicity > 0 && (expected == 0 || *stamp == expected);
   if (ok) *p = {r.p.x(), r.p.y(), r.p.z()};
   lock.fetch_sub(1, std::memory_order_release);
-  return ok;
+  return ok ? VertexRead::read : VertexRead::dead;
+}
+
+// read_vertex, for callers to whom held and dead are alike: true if read.
+inline bool try_read_vertex(const Triangulation::Impl& m, VertexId v, std::uint64_t expected, Point3* p,
+                            std::uint64_t* stamp) {
+  return read_vertex(m, v, expected, p, stamp) == VertexRead::read;
 }
 
 // A worker's body: a coroutine that never returns; destroyed while suspended.

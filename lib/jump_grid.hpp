@@ -12,7 +12,8 @@
 // uniform grid would give a point set that fills a small part of its box (a
 // scanned surface, points near a line) tens of vertices per slot where they
 // are, and walks that many cells longer. For uniform points the tree is two
-// levels: the root's grid, and leaves of 2 x 2 x 2 slots.
+// levels: the root's grid, and leaves of 1, 8 or 27 slots (mostly 8). The
+// engine builds only the root, as equal slots (see grid_rebuild).
 //
 // Encoding: nodes[i] = {first, k | leaf_bit}: an inner node's children are
 // nodes [first, first + k^3), a leaf's slots are slots [first, first + k^3);

@@ -549,3 +549,45 @@ TEST_CASE("contract: an operation blocked escalate_after times runs with the wor
   require_valid(t);
   require_same_as_cgal(t, expected);
 }
+
+TEST_CASE("contract: a removal submitted while a worker holds its vertex is accepted, however the race falls",
+          "[engine][contract][tsan]") {
+  // One point inserted many times (one vertex, multiplicity n), then removed
+  // n times by id from the submitting thread while the workers run the
+  // earlier removals, each holding the vertex for an instant. A submission
+  // that looked while a worker held it and again after the worker let go
+  // used to refuse the vertex as dead (a rare interleaving: a few in a
+  // million here). Every removal must be accepted and complete.
+  pdt::Triangulation t;
+  insert_all(t, random_points(200, 71));
+  const std::size_t n = scaled(600000, 20000);
+  const Point3 repeated{0.5, 0.5, 0.5};
+  const pdt::VertexId v = t.insert(repeated).handle().id;
+  for (std::size_t i = 1; i < n; ++i) t.insert(repeated);
+  REQUIRE(t.multiplicity(v) == n);
+  std::size_t refused = 0;
+  std::string first_refusal;
+  std::atomic<std::size_t> failed{0}, completed{0};
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(8));
+    for (std::size_t i = 0; i < n; ++i) {
+      try {
+        e.remove(v, [&](const pdt::OpResult& r) {
+          if (r.error) failed.fetch_add(1);
+          completed.fetch_add(1);
+        });
+      } catch (const std::exception& x) {
+        if (refused++ == 0) first_refusal = x.what();
+      }
+    }
+    e.drain();
+  });
+  INFO(first_refusal);
+  REQUIRE(refused == 0);
+  REQUIRE(failed.load() == 0);
+  REQUIRE(completed.load() == n);
+  REQUIRE_FALSE(t.is_vertex(v));
+  REQUIRE(t.number_of_vertices() == 200);
+  require_valid(t);
+}

@@ -10,9 +10,10 @@
 // minimal stream (delta debugging, each candidate replayed a few times, as
 // interleavings vary), written as an .ops file.
 //
-//   pdt_fuzz [--seed S] [--cases N] [--seconds T] [--out DIR] [--verbose]
+//   pdt_fuzz [--seed S] [--cases N] [--seconds T] [--minimise-seconds M] [--out DIR] [--verbose]
 //
-// Defaults: seed 1, as many cases as fit in T = 60 seconds. Exit status 0 if
+// Defaults: seed 1, as many cases as fit in T = 60 seconds, minimising a
+// failure for at most M = 120 seconds. Exit status 0 if
 // every case matched, 1 on a mismatch (the minimal stream is in DIR), 2 on a
 // usage error.
 #include <oneapi/tbb/task_arena.h>
@@ -466,12 +467,21 @@ bool fails(const Case& c) {
   return false;
 }
 
-Case minimise(Case c) {
+// Delta debugging, for at most `budget` seconds (a failure that depends on
+// the interleaving rarely repeats, and each candidate is replayed 3 times):
+// *finished is false if the budget ran out first.
+Case minimise(Case c, double budget, bool* finished) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(budget);
+  *finished = true;
   for (std::size_t chunk = c.ops.size() / 2; chunk >= 1; chunk /= 2) {
     bool progress = true;
     while (progress) {
       progress = false;
       for (std::size_t from = 0; from < c.ops.size(); from += chunk) {
+        if (std::chrono::steady_clock::now() >= until) {
+          *finished = false;
+          return c;
+        }
         Case d = without(c, from, std::min(c.ops.size(), from + chunk));
         if (d.ops.size() < c.ops.size() && fails(d)) {
           c = d;
@@ -501,7 +511,7 @@ void write_ops(const Case& c, const std::string& path) {
 
 int main(int argc, char** argv) {
   std::uint64_t seed = 1, cases = 0;
-  double seconds = 60;
+  double seconds = 60, minimise_seconds = 120;
   std::string out = ".";
   bool verbose = false;
   for (int i = 1; i < argc; ++i) {
@@ -517,10 +527,11 @@ int main(int argc, char** argv) {
       if (a == "--seed") seed = std::stoull(value());
       else if (a == "--cases") cases = std::stoull(value());
       else if (a == "--seconds") seconds = std::stod(value());
+      else if (a == "--minimise-seconds") minimise_seconds = std::stod(value());
       else if (a == "--out") out = value();
       else if (a == "--verbose") verbose = true;
       else {
-        std::fprintf(stderr, "usage: pdt_fuzz [--seed S] [--cases N] [--seconds T] [--out DIR] [--verbose]\n");
+        std::fprintf(stderr, "usage: pdt_fuzz [--seed S] [--cases N] [--seconds T] [--minimise-seconds M] [--out DIR] [--verbose]\n");
         return 2;
       }
     } catch (const std::exception&) {
@@ -541,18 +552,21 @@ int main(int argc, char** argv) {
                   c.source.c_str(), c.ops.size(), why.c_str());
       std::printf("pdt_fuzz: reproduce with: pdt_fuzz --seed %llu --cases 1 --verbose\n", static_cast<unsigned long long>(s));
       std::fflush(stdout);
-      const Case m = minimise(c);
+      bool finished = true;
+      const Case m = minimise(c, minimise_seconds, &finished);
       const std::string path = out + "/fuzz-failure-" + std::to_string(s) + ".ops";
       try {
         write_ops(m, path);
-        std::printf("pdt_fuzz: minimal stream (%zu operations, segments as in the case) written to %s\n", m.ops.size(),
-                    path.c_str());
+        if (!finished) std::printf("pdt_fuzz: minimising stopped after %g s (--minimise-seconds)\n", minimise_seconds);
+        std::printf("pdt_fuzz: %s stream (%zu operations, segments as in the case) written to %s\n",
+                    finished ? "minimal" : "smallest failing", m.ops.size(), path.c_str());
       } catch (const std::exception& x) {
         std::printf("pdt_fuzz: could not write the minimal stream: %s\n", x.what());
       }
       std::string again;
-      run_case(m, again, true);
-      std::printf("pdt_fuzz: the minimal case: %s\n", again.c_str());
+      if (run_case(m, again, true))
+        again = "passed when run again: the failure depends on the interleaving, run it repeatedly";
+      std::printf("pdt_fuzz: that stream, run once more: %s\n", again.c_str());
       return 1;
     }
     ++done;

@@ -60,6 +60,10 @@ struct IdleAwait : WorkerAwait {
     es->wake_one();  // an idle worker competes with nobody: let a sleeper run
     // Work that arrived before we said idle, and whose submitter saw us
     // running: look once more (the submitter resumes us after this point).
+    // The fence orders our `phase` store before the `queued` loads of
+    // work_for (a store then a load: the submitter does the mirror image,
+    // `queued` then `phase`, both seq_cst), so one of the two sees the other.
+    std::atomic_thread_fence(std::memory_order_seq_cst);
     if (es->work_for(*wk)) {
       WorkerPhase expect = WorkerPhase::idle;
       // Resume as a new task, not by returning false: a submitter may have

@@ -212,9 +212,13 @@ void TicketTable::sweep_if_large(const StableArray<VertexRec>& verts, std::uint6
       }
     }
   }
-  live_.fetch_sub(erased, std::memory_order_relaxed);
+  const std::uint64_t before = live_.fetch_sub(erased, std::memory_order_relaxed);
   // Next sweep when the table doubles past what is live now (amortised O(1)).
-  sweep_at_.store(2 * std::max<std::uint64_t>(live_now - erased, live_vertices) + (1 << 16), std::memory_order_relaxed);
+  // Tickets issued during the sweep may be among the erased (issue() counts
+  // them in live_ after inserting them), so neither live_now - erased nor
+  // before - erased is sure to be >= 0: clamp, never wrap.
+  const std::uint64_t left = before > erased ? before - erased : 0;
+  sweep_at_.store(2 * std::max<std::uint64_t>(left, live_vertices) + (1 << 16), std::memory_order_relaxed);
 }
 
 }  // namespace pdt::detail

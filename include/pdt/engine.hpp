@@ -171,6 +171,9 @@ class Engine {
   // work that is running it. It is then left running and leaked, still
   // attached to t, whose workers may still read it: t must then be leaked
   // too (never destroyed); it refuses every change from then on.
+  // Every submitting call made from other threads (insert, remove, ...) must
+  // have returned first: an operation's callback may run before the call
+  // that submitted it returns.
   ~Engine() noexcept(false);
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;
@@ -228,7 +231,8 @@ class Engine {
 
   // Calls hook inside every later operation that creates or deletes a vertex
   // (changes.hpp), on the worker that runs it. Set it before submitting:
-  // throws pdt::Error(invalid_argument) while operations are in flight.
+  // throws pdt::Error(invalid_argument) while operations are in flight. The
+  // refusal is a check, not a lock: no other thread may submit during the call.
   void set_change_hook(ChangeHook hook, bool report_destroyed = false);
 
   // Returns when no operation is pending: every one submitted before the call

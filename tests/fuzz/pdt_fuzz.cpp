@@ -8,13 +8,14 @@
 // triangulation must validate and equal CGAL's of the points left, with their
 // multiplicities. Seeded and reproducible: a failure prints its seed, then a
 // minimal stream (delta debugging, each candidate replayed a few times, as
-// interleavings vary), written as an .ops file.
+// interleavings vary; the smallest failing one so far when M runs out),
+// written as an .ops file.
 //
 //   pdt_fuzz [--seed S] [--cases N] [--seconds T] [--minimise-seconds M] [--out DIR] [--verbose]
 //
 // Defaults: seed 1, as many cases as fit in T = 60 seconds, minimising a
 // failure for at most M = 120 seconds. Exit status 0 if
-// every case matched, 1 on a mismatch (the minimal stream is in DIR), 2 on a
+// every case matched, 1 on a mismatch (the stream is in DIR), 2 on a
 // usage error.
 #include <oneapi/tbb/task_arena.h>
 

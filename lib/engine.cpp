@@ -77,6 +77,7 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   impl.grid_growth = Triangulation::Impl::GridGrowth::engine;
   impl.seq->hook = nullptr;  // the engine's hook (set_change_hook) reports its global steps
   impl.seq->report_destroyed = false;
+  impl.seq->outside_readers = true;  // global steps: see OpContext::outside_readers
 }
 
 EngineState::~EngineState() {
@@ -88,6 +89,7 @@ EngineState::~EngineState() {
   }
   impl.seq->hook = impl.hook ? &impl.hook : nullptr;
   impl.seq->report_destroyed = impl.report_destroyed;
+  impl.seq->outside_readers = false;
   impl.grid_growth = Triangulation::Impl::GridGrowth::kernel;
 }
 

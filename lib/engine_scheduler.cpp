@@ -60,10 +60,9 @@ struct IdleAwait : WorkerAwait {
     es->wake_one();  // an idle worker competes with nobody: let a sleeper run
     // Work that arrived before we said idle, and whose submitter saw us
     // running: look once more (the submitter resumes us after this point).
-    // The fence orders our `phase` store before the `queued` loads of
-    // work_for (a store then a load: the submitter does the mirror image,
-    // `queued` then `phase`, both seq_cst), so one of the two sees the other.
-    std::atomic_thread_fence(std::memory_order_seq_cst);
+    // Our `phase` store and work_for's `queued` loads are seq_cst (a store
+    // then a load: the submitter does the mirror image, `queued` then
+    // `phase`, both seq_cst), so one of the two sees the other.
     if (es->work_for(*wk)) {
       WorkerPhase expect = WorkerPhase::idle;
       // Resume as a new task, not by returning false: a submitter may have
@@ -193,7 +192,9 @@ OpRecord* EngineState::take_from_run(Worker& w, OpRecord*& run) {
 // Claiming blocks
 // ---------------------------------------------------------------------------
 bool EngineState::may_serve(const Worker& w, const Block& b) const {
-  return b.queued.load(std::memory_order_acquire) != 0 && b.holder.load(std::memory_order_relaxed) == -1 &&
+  // seq_cst: the idle worker's last look (IdleAwait) relies on it; on x86 a
+  // plain load like acquire.
+  return b.queued.load(std::memory_order_seq_cst) != 0 && b.holder.load(std::memory_order_relaxed) == -1 &&
          (opts.stealing || b.home == w.index);
 }
 

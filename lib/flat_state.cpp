@@ -22,6 +22,7 @@ using detail::orient;
 
 InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
   if (VertexId w = find_flat(p); w != no_vertex) {
+    VertexWrite hold(*this, ctx, w);
     ++verts[w].multiplicity;
     ++ctx.stats.duplicates;
     return {w, false};

@@ -73,7 +73,10 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
       VertexId w = cr.v[i];
       if (w != 0 && pt(w) == p) {
         if (!lock_exclusive(ctx, w)) return rollback();
-        ++verts[w].multiplicity;
+        {
+          VertexWrite hold(*this, ctx, w);
+          ++verts[w].multiplicity;
+        }
         out.stamp = verts[w].stamp.load(std::memory_order_relaxed);
         ++ctx.stats.duplicates;
         ++ctx.stats.insertions;

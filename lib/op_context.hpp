@@ -25,6 +25,12 @@ struct OpContext {
 
   const std::uint32_t id;  // 1..; lock owner id
   const bool locking;      // false: single-threaded, every try-lock succeeds
+  // The sequential context while an engine owns the triangulation (set by
+  // EngineState): its global steps run with no operation beside them, but a
+  // thread outside operations may be reading a vertex under a shared lock
+  // (read_vertex), so it writes a vertex only holding its lock word
+  // (Impl::VertexWrite). Invariant: true only if !locking.
+  bool outside_readers = false;
 
   // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
   // Invariant: free_cells / free_vertices list ids this context may reuse;

@@ -152,10 +152,13 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
     }
   }
   VertexRec& r = verts[v];
-  r.p = p;
-  r.cell = no_cell;
-  r.multiplicity = 1;
-  r.stamp.store(new_incarnation(ctx), std::memory_order_release);
+  {
+    VertexWrite hold(*this, ctx, v);
+    r.p = p;
+    r.cell = no_cell;
+    r.multiplicity = 1;
+    r.stamp.store(new_incarnation(ctx), std::memory_order_release);
+  }
   ++ctx.insertions_made;
   ++ctx.d_vertices;
   ctx.last_vertex = v;
@@ -164,8 +167,11 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
 
 void Triangulation::Impl::free_vertex(OpContext& ctx, VertexId v) {
   VertexRec& r = verts[v];
-  r.multiplicity = 0;
-  r.stamp.store(0, std::memory_order_relaxed);
+  {
+    VertexWrite hold(*this, ctx, v);
+    r.multiplicity = 0;
+    r.stamp.store(0, std::memory_order_relaxed);
+  }
   r.cell = ctx.free_vertices.head;
   if (ctx.free_vertices.count++ == 0) ctx.free_vertices.tail = v;
   ctx.free_vertices.head = v;

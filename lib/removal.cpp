@@ -50,7 +50,10 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
     throw Error(ErrorCode::unknown_vertex, os.str());
   }
   if (verts[v].multiplicity > 1) {
-    --verts[v].multiplicity;
+    {
+      VertexWrite hold(*this, ctx, v);
+      --verts[v].multiplicity;
+    }
     ++ctx.stats.removals;
     release_all(ctx);
     out = RemoveResult::multiplicity_lowered;

@@ -201,6 +201,21 @@ struct Triangulation::Impl {
   bool lock_exclusive(OpContext& ctx, VertexId v);  // upgrades a shared lock we hold
   bool lock_cell_exclusive(OpContext& ctx, CellId c);
   void release_all(OpContext& ctx);
+  // Holds v's lock word exclusively, for its lifetime, while a context with
+  // outside readers (OpContext::outside_readers) writes v's point,
+  // multiplicity or stamp; waits out the readers' brief shared holds. A no-op
+  // for every other context: a locking one holds v already, the plain
+  // sequential one has no readers.
+  class VertexWrite {
+   public:
+    VertexWrite(Impl& m, const OpContext& ctx, VertexId v);
+    ~VertexWrite();
+    VertexWrite(const VertexWrite&) = delete;
+    VertexWrite& operator=(const VertexWrite&) = delete;
+
+   private:
+    std::atomic<std::int32_t>* word_ = nullptr;
+  };
 
   // -- location (locate.cpp) ----------------------------------------------------
   // The cell where a visibility walk from `start` ends: a finite cell whose

@@ -9,6 +9,8 @@
 // The infinite vertex is never locked. Room in the record is made before the
 // lock word changes, so a failed allocation never leaves a lock nobody holds.
 #include <algorithm>
+#include <cassert>
+#include <thread>
 
 #include "fault_injection.hpp"
 #include "triangulation_impl.hpp"
@@ -69,6 +71,30 @@ bool Triangulation::Impl::lock_cell_exclusive(OpContext& ctx, CellId c) {
   const VertexId* v = cells[c].v;
   return lock_exclusive(ctx, v[0]) && lock_exclusive(ctx, v[1]) && lock_exclusive(ctx, v[2]) &&
          lock_exclusive(ctx, v[3]);
+}
+
+Triangulation::Impl::VertexWrite::VertexWrite(Impl& m, const OpContext& ctx, VertexId v) {
+  assert(!(ctx.outside_readers && ctx.locking));
+  if (!ctx.outside_readers || v == 0) return;
+  std::atomic<std::int32_t>& word = m.verts[v].lock;
+  // No operation runs beside a global step, so the word is 0 or held shared
+  // by readers that let go within a few loads. (Held exclusively it can only
+  // be by a context outside any operation, as a test does to force an
+  // escalation; no reader reads it then either, so it is written as it is.)
+  const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
+  std::int32_t cur = word.load(std::memory_order_relaxed);
+  for (unsigned spins = 0; cur >= 0; ++spins) {
+    if (cur == 0 && word.compare_exchange_weak(cur, mine, std::memory_order_acquire, std::memory_order_relaxed)) {
+      word_ = &word;
+      return;
+    }
+    if (spins >= 64) std::this_thread::yield();
+    cur = word.load(std::memory_order_relaxed);
+  }
+}
+
+Triangulation::Impl::VertexWrite::~VertexWrite() {
+  if (word_) word_->store(0, std::memory_order_release);
 }
 
 void Triangulation::Impl::release_all(OpContext& ctx) {

@@ -591,3 +591,77 @@ TEST_CASE("contract: a removal submitted while a worker holds its vertex is acce
   REQUIRE(t.number_of_vertices() == 200);
   require_valid(t);
 }
+
+TEST_CASE("contract: a removal submitted while a global step frees its vertex reads it whole or refuses it",
+          "[engine][contract][tsan]") {
+  // Points on a plane: every removal of a vertex is a global step (the world
+  // stopped, the sequential context frees the vertex). The main thread
+  // removes every vertex once; a second thread meanwhile submits removals of
+  // random vertices, each read (read_vertex) at any moment, perhaps while a
+  // global step frees that very vertex. The global step writes a vertex only
+  // holding its lock word, so a read sees it whole: live (accepted; then it
+  // or the main thread's removal fails in its callback as unknown_vertex) or
+  // dead (refused). Under TSan an unguarded write is a reported race.
+  const std::size_t n = scaled(3000, 600);
+  std::vector<Point3> plane;
+  std::mt19937_64 rng(73);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (std::size_t i = 0; i < n; ++i) plane.push_back({u(rng), u(rng), 0.5});
+  pdt::Triangulation t;
+  std::vector<pdt::VertexId> ids;
+  for (const Point3& p : plane) ids.push_back(t.insert(p).handle().id);
+  REQUIRE(t.dimension() == 2);
+  std::atomic<std::size_t> removed{0}, failed_dead{0}, failed_other{0}, refused_other{0};
+  std::atomic<std::size_t> accepted_by_second{0};
+  auto on_done = [&](const pdt::OpResult& r) {
+    if (!r.error) {
+      removed.fetch_add(1);
+      return;
+    }
+    try {
+      std::rethrow_exception(r.error);
+    } catch (const pdt::Error& x) {
+      (x.code() == pdt::ErrorCode::unknown_vertex ? failed_dead : failed_other).fetch_add(1);
+    } catch (...) {
+      failed_other.fetch_add(1);
+    }
+  };
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(4));
+    std::atomic<bool> stop{false};
+    std::thread second([&] {
+      std::mt19937_64 pick(79);
+      while (!stop.load(std::memory_order_relaxed)) {
+        const pdt::VertexId v = ids[pick() % ids.size()];
+        try {
+          e.remove(v, on_done);
+          accepted_by_second.fetch_add(1);
+        } catch (const pdt::Error& x) {
+          if (x.code() != pdt::ErrorCode::unknown_vertex) refused_other.fetch_add(1);
+        }
+      }
+    });
+    std::size_t refused_main = 0;
+    for (pdt::VertexId v : ids) {
+      try {
+        e.remove(v, on_done);
+      } catch (const pdt::Error& x) {
+        if (x.code() != pdt::ErrorCode::unknown_vertex) refused_other.fetch_add(1);
+        ++refused_main;  // the second thread's removal came first
+      }
+    }
+    stop.store(true);
+    second.join();
+    e.drain();
+    INFO("main thread's removals refused as dead: " << refused_main);
+  });
+  INFO("accepted from the second thread: " << accepted_by_second.load());
+  // Each vertex removed exactly once; every other removal refused up front
+  // or failed as dead, never anything else.
+  REQUIRE(removed.load() == n);
+  REQUIRE(failed_other.load() == 0);
+  REQUIRE(refused_other.load() == 0);
+  REQUIRE(t.number_of_vertices() == 0);
+  require_valid(t);
+}

@@ -156,8 +156,8 @@ void EngineState::submit(OpRecord* op, std::uint32_t count) {
   enqueue(block, op);
 }
 
-void EngineState::submit_undo(std::uint64_t t, const TicketView& view, Engine::Callback done,
-                              BatchCallback* batch_done) {
+OpRecord* EngineState::make_undo(std::uint64_t t, const TicketView& view, Engine::Callback done,
+                                 BatchCallback* batch_done) {
   OpRecord* op = records.acquire();
   op->kind = OpKind::remove_insertion;
   op->ticket = t;
@@ -175,7 +175,7 @@ void EngineState::submit_undo(std::uint64_t t, const TicketView& view, Engine::C
     op->vertex = no_vertex;
   }
   op->routed = false;
-  submit(op);
+  return op;
 }
 
 }  // namespace detail
@@ -452,7 +452,7 @@ InsertResult Engine::insertion_result(Ticket t) const { return state_->tickets.r
 void Engine::remove_insertion(Ticket t, Callback done) {
   const detail::TicketView view = state_->tickets.claim_undo(t);
   try {
-    state_->submit_undo(t, view, std::move(done), nullptr);
+    state_->submit(state_->make_undo(t, view, std::move(done), nullptr));
   } catch (...) {
     state_->tickets.unclaim_undo(t);
     throw;
@@ -474,19 +474,31 @@ void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
       throw;
     }
   }
-  // Spatial order, by the vertices' points where they can be read now.
-  std::vector<Point3> where(batch.size());
-  for (std::size_t i = 0; i < batch.size(); ++i) {
-    std::uint64_t stamp = 0;
-    if (views[i].state == detail::TicketState::inserted && views[i].vertex < e.impl.verts.size())
-      detail::try_read_vertex(e.impl, views[i].vertex, views[i].stamp, &where[i], &stamp);
+  // Everything that can fail (memory) before the first submission: on a
+  // failure every claim is given back and nothing was submitted.
+  std::vector<OpRecord*> ops;
+  auto shared = std::make_unique<detail::BatchCallback>();
+  try {
+    // Spatial order, by the vertices' points where they can be read now.
+    std::vector<Point3> where(batch.size());
+    for (std::size_t i = 0; i < batch.size(); ++i) {
+      std::uint64_t stamp = 0;
+      if (views[i].state == detail::TicketState::inserted && views[i].vertex < e.impl.verts.size())
+        detail::try_read_vertex(e.impl, views[i].vertex, views[i].stamp, &where[i], &stamp);
+    }
+    std::vector<std::uint32_t> order;
+    e.arena->execute([&] { order = detail::spatial_order(where, true); });
+    ops.reserve(batch.size());
+    for (std::uint32_t i : order) ops.push_back(e.make_undo(batch[i], views[i], {}, shared.get()));
+    shared->fn = std::move(done);
+  } catch (...) {
+    for (OpRecord* op : ops) e.records.release(op);
+    for (Ticket t : batch) e.tickets.unclaim_undo(t);
+    throw;
   }
-  std::vector<std::uint32_t> order;
-  e.arena->execute([&] { order = detail::spatial_order(where, true); });
-  auto shared = new detail::BatchCallback();
-  shared->fn = std::move(done);
   shared->remaining.store(batch.size());
-  for (std::uint32_t i : order) e.submit_undo(batch[i], views[i], {}, shared);
+  shared.release();  // the last operation frees it
+  for (OpRecord* op : ops) e.submit(op);
 }
 
 void Engine::set_change_hook(ChangeHook hook, bool report_destroyed) {

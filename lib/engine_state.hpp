@@ -205,7 +205,9 @@ struct EngineState {
   OpRecord* make_remove(VertexHandle v);
   // Routes op to its block; it stands for `count` operations (a run: its points).
   void submit(OpRecord* op, std::uint32_t count = 1);
-  void submit_undo(std::uint64_t t, const TicketView& view, Engine::Callback done, BatchCallback* batch_done);
+  // The record of an undo of ticket t (claimed: view); throws only
+  // std::bad_alloc, before anything changed.
+  OpRecord* make_undo(std::uint64_t t, const TicketView& view, Engine::Callback done, BatchCallback* batch_done);
   void record_client_error(std::exception_ptr e);
 
   // -- scheduling (engine_scheduler.cpp) -----------------------------------------

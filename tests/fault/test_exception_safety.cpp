@@ -240,3 +240,50 @@ TEST_CASE("fault: an engine's insert_batch meeting failed allocations mid-way co
   REQUIRE(failed_in_all > 0);  // the injection did hit
 }
 
+
+TEST_CASE("fault: remove_insertions meeting a failed allocation submits nothing and gives every claim back",
+          "[fault]") {
+  // The records of the undos come from the engine's record pool, which grows
+  // by slabs: undoing more insertions than it holds reaches fault points.
+  // A failure there must leave the batch unsubmitted and every ticket
+  // undoable again; the same call then succeeds.
+  const std::vector<Point3> pts = random_points(5000, 13);
+  pdt::Triangulation t;
+  int failures = 0;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::EngineOptions o;
+    o.workers = 3;
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
+    const pdt::Engine::Ticket first = e.insert_batch(pts);
+    e.drain();
+    REQUIRE(t.number_of_vertices() == pts.size());
+    std::vector<pdt::Engine::Ticket> batch(pts.size());
+    for (std::size_t i = 0; i < pts.size(); ++i) batch[i] = first + i;
+    std::atomic<std::size_t> undone{0}, failed{0};
+    auto count = [&](const pdt::OpResult& r) { (r.error ? failed : undone).fetch_add(1); };
+    for (std::uint64_t k = 0;; ++k) {
+      REQUIRE(k < 100);
+      fault::arm(k);
+      bool threw = false;
+      try {
+        e.remove_insertions(batch, count);
+      } catch (const std::bad_alloc&) {
+        threw = true;
+      }
+      fault::disarm();
+      e.drain();
+      if (!threw) break;
+      ++failures;
+      INFO("failure at point " << k << " (" << fault::last_failed_site() << ")");
+      REQUIRE(undone.load() == 0);
+      REQUIRE(failed.load() == 0);
+      REQUIRE(t.number_of_vertices() == pts.size());
+    }
+    REQUIRE(undone.load() == pts.size());
+    REQUIRE(failed.load() == 0);
+  });
+  REQUIRE(failures > 0);  // the injection did hit
+  REQUIRE(t.number_of_vertices() == 0);
+  require_valid(t);
+}

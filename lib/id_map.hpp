@@ -16,13 +16,41 @@ class IdMap {
   static constexpr std::uint32_t absent = 0xFFFFFFFFu;
   void clear();
   // Returns the value for key, inserting `value` if absent (then *inserted = true).
-  std::uint32_t get_or_insert(std::uint64_t key, std::uint32_t value, bool* inserted = nullptr);
-  std::uint32_t find(std::uint64_t key) const;  // absent if absent
+  std::uint32_t get_or_insert(std::uint64_t key, std::uint32_t value, bool* inserted = nullptr) {
+    if (2 * (used_.size() + 1) > keys_.size()) grow();
+    for (std::size_t s = slot_hash(key, mask_);; s = (s + 1) & mask_) {
+      if (keys_[s] == key) {
+        if (inserted) *inserted = false;
+        return values_[s];
+      }
+      if (keys_[s] == empty_key) {
+        keys_[s] = key;
+        values_[s] = value;
+        used_.push_back(static_cast<std::uint32_t>(s));
+        if (inserted) *inserted = true;
+        return value;
+      }
+    }
+  }
+  std::uint32_t find(std::uint64_t key) const {  // absent if absent
+    if (keys_.empty()) return absent;
+    for (std::size_t s = slot_hash(key, mask_);; s = (s + 1) & mask_) {
+      if (keys_[s] == key) return values_[s];
+      if (keys_[s] == empty_key) return absent;
+    }
+  }
   // Makes room for `entries` without rehashing; may clear the map.
   void reserve_for(std::size_t entries);
 
  private:
   static constexpr std::uint64_t empty_key = ~std::uint64_t{0};
+  // Fibonacci hashing: the table size is a power of two; the high bits of
+  // the product are well mixed, so fold them down.
+  static std::size_t slot_hash(std::uint64_t key, std::size_t mask) {
+    const std::uint64_t h = key * 0x9E3779B97F4A7C15ull;
+    return static_cast<std::size_t>(h ^ (h >> 32)) & mask;
+  }
+  void grow();  // doubles the table (at least 16 slots), keeping the entries
   std::vector<std::uint64_t> keys_;
   std::vector<std::uint32_t> values_;
   std::vector<std::uint32_t> used_;

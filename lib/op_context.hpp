@@ -76,8 +76,9 @@ struct OpContext {
   std::vector<CellId> hole;
   IdMap hole_facet_by_triple;
   IdMap star_seen;                   // cells met by collect_star
-  std::vector<VertexId> link;        // finite link vertices, in small-id order (small id = index + 1)
-  IdMap small_id;                    // big id -> small id (0 for the infinite vertex)
+  // Finite link vertices, in small-id order: small id = index + 1, kept in
+  // the vertex's scratch word while the removal holds it (Impl::small_id).
+  std::vector<VertexId> link;
   std::vector<std::uint32_t> small_facet_boundary;  // 4*small cell + facet -> boundary index or no_index
   std::vector<CellId> small_inside;  // small cells inside the hole
   std::vector<CellId> small_to_new;  // small cell -> the new big cell sewn in for it

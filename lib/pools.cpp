@@ -32,7 +32,7 @@ OpContext::OpContext(std::uint32_t id_, bool locking_)
     : id(id_), locking(locking_), rng(0x9E3779B97F4A7C15ull ^ mix64(id_)) {
   new_cell_by_edge.reserve_for(64);
   cone_edge.resize(std::size_t{cone_ids} * cone_ids);
-  small_id.reserve_for(64);
+  link.reserve(64);
   held_shared.reserve(64);
   held_exclusive.reserve(64);
 }

@@ -109,22 +109,23 @@ OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
   std::vector<CellId>& hole = ctx.hole;
   collect_star(ctx, v, hole);
   // The link: the hole's vertices but v. Finite ones get small ids 1, 2, ...
-  // in the order met (their ids in the small triangulation); the infinite
-  // vertex is 0 in both.
+  // in the order met (their ids in the small triangulation; small_id); the
+  // infinite vertex is 0 in both. A link vertex's small id is kept in its
+  // scratch word, which is ours once we hold the vertex: it is numbered iff
+  // its scratch names its own place in `link` (stale scratch cannot, since
+  // `link` lists only vertices numbered here).
   ctx.link.clear();
-  ctx.small_id.reserve_for(hole.size() * 3);
-  ctx.small_id.clear();
-  ctx.small_id.get_or_insert(0, 0);
   for (CellId c : hole) {
     const CellRec& r = cells[c];
     for (int i = 0; i < 4; ++i) {
       VertexId w = r.v[i];
       if (w == v || w == 0) continue;
-      bool inserted = false;
-      ctx.small_id.get_or_insert(w, static_cast<std::uint32_t>(ctx.link.size() + 1), &inserted);
-      if (inserted) {
-        if (!lock_exclusive(ctx, w)) return OpStatus::rollback;
+      if (!lock_exclusive(ctx, w)) return OpStatus::rollback;  // already ours: one load
+      std::uint32_t& s = verts[w].scratch;
+      if (s == 0 || s > ctx.link.size() || ctx.link[s - 1] != w) {
+        if (ctx.link.size() == ctx.link.capacity()) PDT_FAULT_POINT("link");
         ctx.link.push_back(w);
+        s = static_cast<std::uint32_t>(ctx.link.size());
       }
     }
   }
@@ -230,9 +231,9 @@ void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
     std::memcpy(bf.v, cells[h].v, sizeof bf.v);
     bf.outer = cells[h].n[k];
     bf.facet = k;
-    std::uint32_t a = ctx.small_id.find(bf.v[facet_vertex[k][0]]);
-    std::uint32_t b = ctx.small_id.find(bf.v[facet_vertex[k][1]]);
-    std::uint32_t c = ctx.small_id.find(bf.v[facet_vertex[k][2]]);
+    std::uint32_t a = small_id(bf.v[facet_vertex[k][0]]);
+    std::uint32_t b = small_id(bf.v[facet_vertex[k][1]]);
+    std::uint32_t c = small_id(bf.v[facet_vertex[k][2]]);
     facets.get_or_insert(triple_key(a, b, c), static_cast<std::uint32_t>(ctx.boundary.size()));
     ctx.boundary.push_back(bf);
   }
@@ -240,7 +241,7 @@ void Triangulation::Impl::sew_link_triangulation(OpContext& ctx, VertexId v) {
   // facet in the same cyclic order as the hole cell does.
   const OpContext::BoundaryFacet& f0 = ctx.boundary.front();
   std::uint32_t t0[3];
-  for (int j = 0; j < 3; ++j) t0[j] = ctx.small_id.find(f0.v[facet_vertex[f0.facet][j]]);
+  for (int j = 0; j < 3; ++j) t0[j] = small_id(f0.v[facet_vertex[f0.facet][j]]);
   s.collect_star(sctx, t0[0] != 0 ? t0[0] : t0[1], ctx.small_star);
   CellId start = no_cell;
   for (CellId sc : ctx.small_star) {

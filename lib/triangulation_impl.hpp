@@ -269,6 +269,8 @@ struct Triangulation::Impl {
   void collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out);
   void fill_hole_flat_link(OpContext& ctx, VertexId v);
   void sew_link_triangulation(OpContext& ctx, VertexId v);
+  // A link vertex's id in the link triangulation (remove_3d numbered it).
+  std::uint32_t small_id(VertexId w) const { return w == 0 ? 0 : verts[w].scratch; }
 
   // -- dimension < 3 (flat_state.cpp; single-threaded only) ----------------------
   InsertResult insert_flat(OpContext& ctx, const KPoint& p);

@@ -130,6 +130,10 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
     zone.push_back(c0);
     for (std::size_t idx = 0; idx < zone.size() && status == OpStatus::done; ++idx) {
       CellId c = zone[idx];
+      for (int i = 0; i < 4; ++i) {  // fetch the four neighbours at once (scattered in memory)
+        __builtin_prefetch(&cells[cells[c].n[i] >> 2]);
+        __builtin_prefetch(&tags[cells[c].n[i] >> 2]);
+      }
       for (int i = 0; i < 4; ++i) {
         std::uint32_t nw = cells[c].n[i];
         CellId nb = nw >> 2;

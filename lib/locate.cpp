@@ -61,6 +61,9 @@ CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool
   while (true) {
     const CellRec& cr = cells[c];
     const KPoint* q[4] = {&pt(cr.v[0]), &pt(cr.v[1]), &pt(cr.v[2]), &pt(cr.v[3])};
+    // The next cell is one of these: fetch their records while the
+    // orientations wait for the points (cells are scattered in memory).
+    for (int i = 0; i < 4; ++i) __builtin_prefetch(&cells[cr.n[i] >> 2]);
     int first = static_cast<int>(r & 3);
     r = (r >> 2) | (r << 62);
     CellId next = no_cell;

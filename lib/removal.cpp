@@ -99,7 +99,12 @@ void Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<C
       CellId nb = cells[c].n[i] >> 2;  // facet i contains v
       bool inserted = false;
       seen.get_or_insert(nb, 0, &inserted);
-      if (inserted) out.push_back(nb);
+      if (inserted) {
+        // Fetched while the cells queued before it are read: the star's
+        // cells are scattered in memory, and this walk is their first touch.
+        __builtin_prefetch(&cells[nb]);
+        out.push_back(nb);
+      }
     }
   }
 }
@@ -115,6 +120,8 @@ OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
   // its scratch names its own place in `link` (stale scratch cannot, since
   // `link` lists only vertices numbered here).
   ctx.link.clear();
+  for (CellId c : hole)  // the records are scattered: fetch them all at once
+    for (VertexId w : cells[c].v) __builtin_prefetch(&verts[w]);
   for (CellId c : hole) {
     const CellRec& r = cells[c];
     for (int i = 0; i < 4; ++i) {

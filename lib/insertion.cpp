@@ -124,15 +124,24 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
     for (CellId c : zone) set_mark(c, 0);
     for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
   };
+  auto fetch_neighbours = [&](CellId c) {  // their records and tags, for when c is searched
+    for (int j = 0; j < 4; ++j) {
+      __builtin_prefetch(&cells[cells[c].n[j] >> 2]);
+      __builtin_prefetch(&tags[cells[c].n[j] >> 2]);
+    }
+  };
   OpStatus status = OpStatus::done;
   try {
     set_mark(c0, mark_in);
     zone.push_back(c0);
+    fetch_neighbours(c0);
     for (std::size_t idx = 0; idx < zone.size() && status == OpStatus::done; ++idx) {
       CellId c = zone[idx];
-      for (int i = 0; i < 4; ++i) {  // fetch the four neighbours at once (scattered in memory)
-        __builtin_prefetch(&cells[cells[c].n[i] >> 2]);
-        __builtin_prefetch(&tags[cells[c].n[i] >> 2]);
+      // Cells are scattered in memory: fetch ahead. The neighbours' records
+      // were fetched when c joined the zone; now the one point each adds.
+      for (int i = 0; i < 4; ++i) {
+        const std::uint32_t nw = cells[c].n[i];
+        __builtin_prefetch(&pt(cells[nw >> 2].v[nw & 3]));
       }
       for (int i = 0; i < 4; ++i) {
         std::uint32_t nw = cells[c].n[i];
@@ -148,6 +157,7 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
             PDT_FAULT_POINT("conflict zone");
             zone.push_back(nb);
             set_mark(nb, mark_in);
+            fetch_neighbours(nb);
             continue;
           }
         }

@@ -4,7 +4,7 @@
 // points, same order, same run.
 //
 //   bench_sequential [--points N] [--dists uniform,normal,line] [--remove-fraction F] [--seed S]
-//                    [--inputs FILE,FILE...]
+//                    [--inputs FILE,FILE...] [--repeat K]
 //
 // Per distribution: N points from pdt::generate, inserted one at a time in the
 // generated (random) order with no spatial sort; per input file (--inputs,
@@ -17,6 +17,9 @@
 // cells (MISMATCH is printed otherwise).
 // Then batch mode: Triangulation::insert_batch(all) against CGAL's
 // insert(first, last), both spatially sorting the batch inside the timing.
+// --repeat K runs each distribution K rounds (pdt and CGAL alternate within a
+// round, so a slow spell of a shared machine hits both) and prints medians,
+// with each ratio's range over the rounds.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -104,10 +107,55 @@ Row run_one(const std::string& name, const std::vector<pdt::Point3>& pts, double
   return row;
 }
 
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+struct Range {
+  double lo = 0, hi = 0;
+};
+
+// Medians of the times over the rounds (everything else from the first);
+// the ranges of the per-round ratios in *ins, *rem, *batch.
+Row merge_rounds(const std::vector<Row>& rounds, Range* ins, Range* rem, Range* batch) {
+  Row r = rounds.front();
+  auto med = [&](auto get) {
+    std::vector<double> v;
+    for (const Row& x : rounds) v.push_back(get(x));
+    return median_of(v);
+  };
+  auto range = [&](auto num, auto den) {
+    Range g{1e300, 0};
+    for (const Row& x : rounds) {
+      const double q = den(x) > 0 ? num(x) / den(x) : 0;
+      g.lo = std::min(g.lo, q);
+      g.hi = std::max(g.hi, q);
+    }
+    return g;
+  };
+  r.pdt_insert = med([](const Row& x) { return x.pdt_insert; });
+  r.pdt_remove = med([](const Row& x) { return x.pdt_remove; });
+  r.pdt_batch = med([](const Row& x) { return x.pdt_batch; });
+  r.cgal.insert_seconds = med([](const Row& x) { return x.cgal.insert_seconds; });
+  r.cgal.remove_seconds = med([](const Row& x) { return x.cgal.remove_seconds; });
+  r.cgal_batch = med([](const Row& x) { return x.cgal_batch; });
+  *ins = range([](const Row& x) { return x.pdt_insert; }, [](const Row& x) { return x.cgal.insert_seconds; });
+  *rem = range([](const Row& x) { return x.pdt_remove; }, [](const Row& x) { return x.cgal.remove_seconds; });
+  *batch = range([](const Row& x) { return x.pdt_batch; }, [](const Row& x) { return x.cgal_batch; });
+  return r;
+}
+
+bool same_shapes(const Row& r) {
+  const CgalRun& c = r.cgal;
+  return r.pdt_finite == c.shape.finite_cells && r.pdt_vertices == c.shape.vertices &&
+         r.pdt_cells_after_insert == c.cells_after_insert_all && r.pdt_batch_cells == r.cgal_batch_cells;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::uint64_t points = 1000000, seed = 1;
+  std::uint64_t points = 1000000, seed = 1, repeat = 1;
   std::vector<std::string> dist_names{"uniform", "normal", "line"}, inputs;
   double remove_fraction = 0.1;
   ArgParser args(argv[0], "pdt's sequential kernel against CGAL's Delaunay_triangulation_3, one point at a time, "
@@ -119,6 +167,8 @@ int main(int argc, char** argv) {
   args.count("--seed", "generator seed (default 1)", seed);
   args.list("--inputs", "comma-separated point files, run after the distributions (their distinct points, shuffled)",
             inputs);
+  args.count("--repeat", "rounds per distribution, pdt and CGAL alternating; medians and ratio ranges (default 1)",
+             repeat, 1);
   args.parse(argc, argv);
   const std::vector<pdt::Distribution> dists = distributions(dist_names);
   // Every input read before anything runs: a bad file fails at once.
@@ -143,7 +193,12 @@ int main(int argc, char** argv) {
 
   std::printf("bench_sequential: %llu points, remove fraction %g, seed %llu; one point at a time, no spatial sort\n",
               static_cast<unsigned long long>(points), remove_fraction, static_cast<unsigned long long>(seed));
-  std::printf("CGAL: Delaunay_triangulation_3<Epick, Default, Fast_location>, insert(p) / remove(vh)\n\n");
+  std::printf("CGAL: Delaunay_triangulation_3<Epick, Default, Fast_location>, insert(p) / remove(vh)\n");
+  if (repeat > 1)
+    std::printf("%llu rounds per distribution: times are medians; the ratios' ranges over the rounds follow the "
+                "tables\n",
+                static_cast<unsigned long long>(repeat));
+  std::printf("\n");
   std::printf("%-8s %9s | %9s %9s %6s | %8s %9s %9s %6s | %8s %8s %6s | %8s %9s %9s %9s %9s | %s\n", "dist",
               "N", "pdt ins s", "CGAL ins", "ratio", "removed", "pdt rem s", "CGAL rem", "ratio", "created/",
               "touched/", "walk/", "pdt B/", "pdt RSS", "pdt RSS", "CGAL RSS", "CGAL RSS", "finite cells");
@@ -152,17 +207,26 @@ int main(int argc, char** argv) {
               "pdt / CGAL");
   int mismatches = 0;
   std::vector<Row> rows;
+  std::vector<Range> ins_ranges, rem_ranges, batch_ranges;
   std::vector<std::pair<std::string, std::vector<pdt::Point3>>> sets;
   for (pdt::Distribution d : dists) sets.emplace_back(pdt::to_string(d), std::vector<pdt::Point3>{});
   for (auto& set : input_sets) sets.push_back(std::move(set));
   for (std::size_t i = 0; i < sets.size(); ++i) {
     // A distribution's points are generated only when its turn comes.
     if (i < dists.size()) sets[i].second = generated_points(dists[i], points, seed).points;
-    const Row& r = rows.emplace_back(run_one(sets[i].first, sets[i].second, remove_fraction));
+    std::vector<Row> rounds;
+    bool same = true;
+    for (std::uint64_t k = 0; k < repeat; ++k) {
+      rounds.push_back(run_one(sets[i].first, sets[i].second, remove_fraction));
+      same = same && same_shapes(rounds.back());
+    }
     sets[i].second = {};
+    Range ins, rem, batch;
+    const Row& r = rows.emplace_back(merge_rounds(rounds, &ins, &rem, &batch));
+    ins_ranges.push_back(ins);
+    rem_ranges.push_back(rem);
+    batch_ranges.push_back(batch);
     const CgalRun& c = r.cgal;
-    const bool same = r.pdt_finite == c.shape.finite_cells && r.pdt_vertices == c.shape.vertices &&
-                      r.pdt_cells_after_insert == c.cells_after_insert_all && r.pdt_batch_cells == r.cgal_batch_cells;
     mismatches += !same;
     std::printf(
         "%-8s %9zu | %9.3f %9.3f %6.2f | %8zu %9.3f %9.3f %6.2f | %8.2f %8.2f %6.2f | %8.1f %9.1f %9.1f %9.1f %9.1f | "
@@ -184,6 +248,14 @@ int main(int argc, char** argv) {
     std::printf("%-8s %9zu | %11.3f %11.3f %6.2f | %zu / %zu%s\n", r.dist.c_str(), r.n, r.pdt_batch, r.cgal_batch,
                 r.cgal_batch > 0 ? r.pdt_batch / r.cgal_batch : 0.0, r.pdt_batch_cells, r.cgal_batch_cells,
                 r.pdt_batch_cells == r.cgal_batch_cells ? "" : "  MISMATCH");
+  if (repeat > 1) {
+    std::printf("\nRatio ranges over the %llu rounds (pdt / CGAL, each round's own)\n",
+                static_cast<unsigned long long>(repeat));
+    std::printf("%-8s | %13s | %13s | %13s\n", "dist", "insert", "remove", "batch");
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      std::printf("%-8s | %5.2f - %5.2f | %5.2f - %5.2f | %5.2f - %5.2f\n", rows[i].dist.c_str(), ins_ranges[i].lo,
+                  ins_ranges[i].hi, rem_ranges[i].lo, rem_ranges[i].hi, batch_ranges[i].lo, batch_ranges[i].hi);
+  }
   if (mismatches) std::printf("\n%d distribution(s) with MISMATCH\n", mismatches);
   return mismatches ? 1 : 0;
 }

@@ -222,7 +222,8 @@ class Engine {
   void remove_insertion(Ticket t, Callback done = {});
   // A batch of undos, submitted in spatial order (as insert_batch). All or
   // nothing: throws, and undoes nothing, if any ticket was never issued, is
-  // already undone or appears twice.
+  // already undone or appears twice, or if memory runs out while the batch is
+  // prepared (std::bad_alloc); every ticket can then be undone again.
   void remove_insertions(std::span<const Ticket> tickets, Callback done = {});
   // Tickets cost memory only while they can still be used: a ticket is
   // released once its insertion is undone, or once its vertex is gone

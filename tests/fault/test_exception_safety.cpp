@@ -280,10 +280,12 @@ TEST_CASE("fault: remove_insertions meeting a failed allocation submits nothing 
       REQUIRE(failed.load() == 0);
       REQUIRE(t.number_of_vertices() == pts.size());
     }
-    REQUIRE(undone.load() == pts.size());
-    REQUIRE(failed.load() == 0);
+    // The call that succeeded left the countdown armed until it returned: a
+    // worker that started meanwhile may have met it (its undo then failed,
+    // changing nothing; slow builds such as TSan's show it).
+    REQUIRE(undone.load() + failed.load() == pts.size());
+    REQUIRE(t.number_of_vertices() == failed.load());
   });
   REQUIRE(failures > 0);  // the injection did hit
-  REQUIRE(t.number_of_vertices() == 0);
   require_valid(t);
 }

@@ -38,8 +38,9 @@ struct VertexRec {
   std::atomic<std::int32_t> lock{0};
   // Scratch of the one operation that holds this vertex exclusively (the
   // sequential context holds everything): cone_from_vertex numbers the
-  // boundary's vertices here. Meaningless between operations; it fills what
-  // would be padding, so the record stays 48 bytes.
+  // boundary's vertices here, remove_3d the link's (Impl::small_id).
+  // Meaningless between operations; it fills what would be padding, so the
+  // record stays 48 bytes.
   std::uint32_t scratch = 0;
   // Unique per vertex incarnation; 0 when free. Atomic so that a thread
   // submitting a removal can read it without a lock: it is stored (release)

@@ -208,12 +208,17 @@ struct Triangulation::Impl {
   // sequential one has no readers.
   class VertexWrite {
    public:
-    VertexWrite(Impl& m, const OpContext& ctx, VertexId v);
-    ~VertexWrite();
+    VertexWrite(Impl& m, const OpContext& ctx, VertexId v) {
+      if (ctx.outside_readers && v != 0) take(m.verts[v].lock, ctx);  // else nothing: the usual case
+    }
+    ~VertexWrite() {
+      if (word_) word_->store(0, std::memory_order_release);
+    }
     VertexWrite(const VertexWrite&) = delete;
     VertexWrite& operator=(const VertexWrite&) = delete;
 
    private:
+    void take(std::atomic<std::int32_t>& word, const OpContext& ctx);  // vertex_locks.cpp
     std::atomic<std::int32_t>* word_ = nullptr;
   };
 

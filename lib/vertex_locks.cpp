@@ -73,10 +73,8 @@ bool Triangulation::Impl::lock_cell_exclusive(OpContext& ctx, CellId c) {
          lock_exclusive(ctx, v[3]);
 }
 
-Triangulation::Impl::VertexWrite::VertexWrite(Impl& m, const OpContext& ctx, VertexId v) {
-  assert(!(ctx.outside_readers && ctx.locking));
-  if (!ctx.outside_readers || v == 0) return;
-  std::atomic<std::int32_t>& word = m.verts[v].lock;
+void Triangulation::Impl::VertexWrite::take(std::atomic<std::int32_t>& word, const OpContext& ctx) {
+  assert(!ctx.locking);
   // No operation runs beside a global step, so the word is 0 or held shared
   // by readers that let go within a few loads. (Held exclusively it can only
   // be by a context outside any operation, as a test does to force an
@@ -91,10 +89,6 @@ Triangulation::Impl::VertexWrite::VertexWrite(Impl& m, const OpContext& ctx, Ver
     if (spins >= 64) std::this_thread::yield();
     cur = word.load(std::memory_order_relaxed);
   }
-}
-
-Triangulation::Impl::VertexWrite::~VertexWrite() {
-  if (word_) word_->store(0, std::memory_order_release);
 }
 
 void Triangulation::Impl::release_all(OpContext& ctx) {

@@ -31,15 +31,20 @@ class Samples {
   std::int64_t nearest_within(const Point3& p, double r) const { return nearest(p, r, false); }
   // The nearest sample within r of p that nobody has claimed yet, or -1.
   std::int64_t nearest_free_within(const Point3& p, double r) const { return nearest(p, r, true); }
+  // Reads the grid cells that the ball (p, r) meets, at most 129 per axis:
+  // for the refiner's snap radius (half a cell) 8 of them, not the 27 around
+  // p's cell (those lookups were the refiner's hottest function).
   std::int64_t nearest(const Point3& p, double r, bool free_only) const {
-    const auto k = key(p);
-    const std::int64_t reach = std::min<std::int64_t>(static_cast<std::int64_t>(std::ceil(r / cell_)), 64);
+    const double w = r * (1 + 1e-9);  // rounding in p +- r must not drop a cell
+    const Key lo = key({p.x - w, p.y - w, p.z - w}), hi = key({p.x + w, p.y + w, p.z + w}), k = key(p);
+    Key from, to;
+    for (int a = 0; a < 3; ++a) from[a] = std::max(lo[a], k[a] - 64), to[a] = std::min(hi[a], k[a] + 64);
     std::int64_t best = -1;
     double best_d2 = r * r;
-    for (std::int64_t dz = -reach; dz <= reach; ++dz)
-      for (std::int64_t dy = -reach; dy <= reach; ++dy)
-        for (std::int64_t dx = -reach; dx <= reach; ++dx) {
-          auto it = grid_.find({k[0] + dx, k[1] + dy, k[2] + dz});
+    for (std::int64_t z = from[2]; z <= to[2]; ++z)
+      for (std::int64_t y = from[1]; y <= to[1]; ++y)
+        for (std::int64_t x = from[0]; x <= to[0]; ++x) {
+          auto it = grid_.find({x, y, z});
           if (it == grid_.end()) continue;
           for (std::uint32_t i : it->second)
             if (const double d2 = dist2(p, pts_[i]);

@@ -35,7 +35,9 @@ class Samples {
   // for the refiner's snap radius (half a cell) 8 of them, not the 27 around
   // p's cell (those lookups were the refiner's hottest function).
   std::int64_t nearest(const Point3& p, double r, bool free_only) const {
-    const double w = r * (1 + 1e-9);  // rounding in p +- r must not drop a cell
+    // Widened so that rounding in p +- r (an ulp of p's largest coordinate,
+    // not of r) and in the division by the cell size never drops a cell.
+    const double w = r * (1 + 1e-9) + 1e-12 * std::max({std::abs(p.x), std::abs(p.y), std::abs(p.z)});
     const Key lo = key({p.x - w, p.y - w, p.z - w}), hi = key({p.x + w, p.y + w, p.z + w}), k = key(p);
     Key from, to;
     for (int a = 0; a < 3; ++a) from[a] = std::max(lo[a], k[a] - 64), to[a] = std::min(hi[a], k[a] + 64);

@@ -16,6 +16,7 @@ namespace pdt::detail {
 OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp) {
   switch (op.kind) {
     case OpKind::insert: {
+      if (!op.only_if_alive) tickets.prefetch(op.ticket);  // finish_inserted's slot, fetched meanwhile
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
       const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);

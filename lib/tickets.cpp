@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include "tickets.hpp"
 
+#include <sys/mman.h>
+
+#include <cstdlib>
 #include <string>
 
 #include "fault_injection.hpp"
@@ -8,6 +11,28 @@
 #include "pdt/error.hpp"
 
 namespace pdt::detail {
+
+template <class T>
+T* TicketTable::SlotAllocator<T>::allocate(std::size_t n) {
+  constexpr std::size_t huge = std::size_t{2} << 20;
+  const std::size_t bytes = n * sizeof(T);
+  if (bytes < huge) return std::allocator<T>().allocate(n);
+  const std::size_t rounded = (bytes + huge - 1) / huge * huge;
+  void* p = std::aligned_alloc(huge, rounded);
+  if (!p) throw std::bad_alloc();
+  ::madvise(p, rounded, MADV_HUGEPAGE);
+  return static_cast<T*>(p);
+}
+
+template <class T>
+void TicketTable::SlotAllocator<T>::deallocate(T* p, std::size_t n) noexcept {
+  if (n * sizeof(T) < (std::size_t{2} << 20))
+    std::allocator<T>().deallocate(p, n);
+  else
+    std::free(p);
+}
+
+template struct TicketTable::SlotAllocator<TicketTable::Slot>;
 
 // ---------------------------------------------------------------------------
 // One shard: open addressing on mix64(ticket + 1), linear probing
@@ -30,9 +55,11 @@ void TicketTable::Shard::reserve(std::size_t n) {
   while (want < 2 * n) want <<= 1;
   if (want <= slots.size()) return;
   PDT_FAULT_POINT("ticket shard");
-  std::vector<Slot> old(want);
+  std::vector<Slot, SlotAllocator<Slot>> old(want);
   old.swap(slots);
   const std::size_t mask = slots.size() - 1;
+  prefetch_base.store(reinterpret_cast<std::uintptr_t>(slots.data()), std::memory_order_relaxed);
+  prefetch_mask.store(mask, std::memory_order_relaxed);
   for (const Slot& s : old) {
     if (s.key == 0) continue;
     std::size_t i = mix64(s.key) & mask;
@@ -71,6 +98,16 @@ void TicketTable::unknown(std::uint64_t t, const char* why) {
   throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": " + why);
 }
 
+void TicketTable::prefetch(std::uint64_t t) const {
+  const Shard& s = shard(t);
+  const std::uintptr_t base = s.prefetch_base.load(std::memory_order_relaxed);
+  if (base == 0) return;
+  // Integer arithmetic: base and mask may be from two different resizes, so
+  // the address may lie outside every vector (a prefetch never faults).
+  const std::uintptr_t home = base + (mix64(t + 1) & s.prefetch_mask.load(std::memory_order_relaxed)) * sizeof(Slot);
+  __builtin_prefetch(reinterpret_cast<const void*>(home), 1);
+}
+
 std::uint64_t TicketTable::issue(std::uint64_t n) {
   // Tickets are consecutive per call: one issuer at a time reserves room in
   // every shard it touches, then takes the numbers.
@@ -82,10 +119,10 @@ std::uint64_t TicketTable::issue(std::uint64_t n) {
     std::lock_guard lock(s.mutex);
     s.reserve(s.count + per_shard);
   }
-  for (std::uint64_t t = first; t < first + n; ++t) {
-    Shard& s = shard(t);
+  for (unsigned k = 0; k < shard_count && k < n; ++k) {  // shard by shard: one lock each
+    Shard& s = shard(first + k);
     std::lock_guard lock(s.mutex);
-    s.insert(t);
+    for (std::uint64_t t = first + k; t < first + n; t += shard_count) s.insert(t);
   }
   live_.fetch_add(n, std::memory_order_relaxed);
   next_.store(first + n, std::memory_order_release);

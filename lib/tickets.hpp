@@ -8,8 +8,11 @@
 // Memory follows what can still be referenced, not what was ever submitted:
 // a slot is erased when its undo has run, and slots whose vertex is gone
 // (removed by handle or id) are swept once they outnumber the live vertices.
-// The slots live in 64 shards (ticket mod 64), each an open-addressing table
-// with backward-shift deletion under its own mutex.
+// The slots live in 16 shards (ticket mod 16), each an open-addressing table
+// with backward-shift deletion under its own mutex. 16, not more: a finish
+// holds its shard for one find, and at 1M live tickets a shard's slots fill
+// 4 MiB, large enough for huge pages (SlotAllocator); a batch finishes in
+// spatial order, so each find lands on a random slot.
 // Invariants: a slot exists for every ticket issued and not released;
 // pending slots are never swept; a parked undo exists only on a pending slot.
 #include <atomic>
@@ -42,6 +45,13 @@ class TicketTable {
   std::uint64_t issue(std::uint64_t n);
   std::uint64_t issued() const { return next_.load(std::memory_order_relaxed); }
   std::uint64_t live() const { return live_.load(std::memory_order_relaxed); }
+  // Fetches the cache line where t's slot most likely is (its home), without
+  // the shard's lock: an insertion calls it when it starts, so that
+  // finish_inserted, microseconds later, does not wait for memory (the slots
+  // are scattered by hash and a batch finishes in spatial, not ticket, order).
+  // A hint only: it reads nothing, and may fetch a stale line while the shard
+  // is being resized.
+  void prefetch(std::uint64_t t) const;
 
   // Claims the undo of t; throws pdt::Error(unknown_vertex) for a ticket
   // never issued, released, already undone, or whose insertion failed (that
@@ -76,9 +86,25 @@ class TicketTable {
     bool inserted = false;
     bool undone = false;
   };
+  // The slots' memory: blocks of 2 MiB and more on transparent huge pages, so
+  // that the scattered finds of a large batch do not miss the TLB each time.
+  template <class T>
+  struct SlotAllocator {
+    using value_type = T;
+    SlotAllocator() = default;
+    template <class U>
+    SlotAllocator(const SlotAllocator<U>&) noexcept {}
+    T* allocate(std::size_t n);
+    void deallocate(T* p, std::size_t n) noexcept;
+    bool operator==(const SlotAllocator&) const = default;
+  };
   struct alignas(64) Shard {
     mutable std::mutex mutex;
-    std::vector<Slot> slots;  // power of two (or empty), at most half full
+    std::vector<Slot, SlotAllocator<Slot>> slots;  // power of two (or empty), at most half full
+    // slots.data() and slots.size() - 1 for prefetch(), which reads them
+    // without the mutex; written under it whenever slots is replaced.
+    std::atomic<std::uintptr_t> prefetch_base{0};
+    std::atomic<std::size_t> prefetch_mask{0};
     std::size_t count = 0;
     std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
     Slot* find(std::uint64_t t);
@@ -87,7 +113,7 @@ class TicketTable {
     void reserve(std::size_t n);
     void erase(Slot* s);
   };
-  static constexpr unsigned shard_count = 64;
+  static constexpr unsigned shard_count = 16;
   Shard& shard(std::uint64_t t) { return shards_[t % shard_count]; }
   const Shard& shard(std::uint64_t t) const { return shards_[t % shard_count]; }
   [[noreturn]] static void unknown(std::uint64_t t, const char* why);

@@ -903,7 +903,9 @@ TEST_CASE("coplanar start: apex positions", "[insert][degenerate]") {
 TEST_CASE("insert_batch equals CGAL and reports each point's vertex in the batch's order", "[insert]") {
   std::vector<std::vector<Point3>> sets = {generated_points(pdt::Distribution::uniform, 5000, 11),
                                            generated_points(pdt::Distribution::line, 3000, 12), lattice(7),
-                                           cospherical(325)};
+                                           cospherical(325),
+                                           // insert_batch gathers 1024 points at a time: whole chunks only
+                                           generated_points(pdt::Distribution::uniform, 2048, 16)};
   // Duplicates inside one batch: the second copy raises the multiplicity.
   std::vector<Point3> dups = generated_points(pdt::Distribution::normal, 1000, 13);
   dups.insert(dups.end(), dups.begin(), dups.begin() + 300);

@@ -1,9 +1,13 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// The order in which a batch of points is inserted: CGAL's spatial sort
-// (Hilbert curve over a biased randomized insertion order, BRIO), so that
-// consecutive points are close and each walk starts next to its target, the
-// order CGAL's own range insertion uses.
+// The order in which a batch of points is inserted: a biased randomized
+// insertion order (BRIO) whose rounds follow a Hilbert curve, so that
+// consecutive points are close and each walk starts next to its target. The
+// rounds are CGAL's spatial_sort's (its range insertion's order); the curve
+// is computed on 21-bit keys per axis over the points' bounding box, and
+// CGAL's own median-split sort takes over where those keys cannot tell the
+// points apart (a cluster far smaller than the box) or the box is out of a
+// double's range.
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -12,8 +16,10 @@
 
 namespace pdt::detail {
 
-// A permutation of 0..points.size()-1. parallel: sort with oneTBB in the
-// caller's arena. Points must be finite.
+// A permutation of 0..points.size()-1, the same on every run and for either
+// value of parallel (with the keys; CGAL's fallback may differ between the
+// two). parallel: keys and sort with oneTBB in the caller's arena. Points
+// must be finite.
 std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool parallel);
 
 }  // namespace pdt::detail

@@ -203,8 +203,9 @@ class Engine {
   void locate(const Point3& p, Callback done);
   void nearest_vertex(const Point3& p, Callback done);
   void visit(CellHandle h, CellVisitor fn, Callback done);
-  // A batch of insertions, submitted in spatial order (CGAL's spatial sort,
-  // parallel in the engine's arena, as CGAL's range insertion does): each
+  // A batch of insertions, submitted in spatial order (a biased randomized
+  // insertion order along a Hilbert curve, computed in the engine's arena, as
+  // CGAL's range insertion orders its points): each
   // worker then walks from its previous vertex, about twice as fast as a
   // random order. Insertion first + i inserts points[i]; first is returned.
   // Checks every point first: throws pdt::Error for a NaN/Inf point or one

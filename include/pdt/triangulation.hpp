@@ -118,8 +118,9 @@ class Triangulation {
   // Inserts p only if cell h is still alive; otherwise inserts nothing and
   // returns {no_vertex, false}.
   InsertResult insert_if_alive(const Point3& p, CellHandle h);
-  // Inserts a batch in an order of its own (CGAL's spatial sort, as CGAL's
-  // range insertion does): consecutive points are close, so it is about twice
+  // Inserts a batch in an order of its own (a biased randomized insertion
+  // order along a Hilbert curve, the order of CGAL's range insertion; the same
+  // on every run): consecutive points are close, so it is about twice
   // as fast as inserting the same points one by one in a random order. The
   // result is the same, the triangulation being unique. Results come in the
   // batch's order. Checks every point first: throws pdt::Error

@@ -3,6 +3,7 @@
 
 #include <sys/mman.h>
 
+#include <cassert>
 #include <cstdlib>
 #include <string>
 
@@ -40,6 +41,8 @@ template struct TicketTable::SlotAllocator<TicketTable::Slot>;
 TicketTable::Slot* TicketTable::Shard::find(std::uint64_t t) {
   if (slots.empty()) return nullptr;
   const std::size_t mask = slots.size() - 1;
+  assert(prefetch_base.load(std::memory_order_relaxed) == reinterpret_cast<std::uintptr_t>(slots.data()) &&
+         prefetch_mask.load(std::memory_order_relaxed) == mask);  // prefetch() follows the slots
   for (std::size_t i = mix64(t + 1) & mask;; i = (i + 1) & mask) {
     if (slots[i].key == t + 1) return &slots[i];
     if (slots[i].key == 0) return nullptr;

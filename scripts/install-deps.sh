@@ -2,13 +2,15 @@
 # SPDX-License-Identifier: MIT
 # Installs pdt's build dependencies from Debian 12 packages. Idempotent: packages
 # already present are left alone, so it is cheap to run before every build.
-#   install-deps.sh            what building and testing need (python3-vtk9: the test
-#                              that reads pdt's .vtu files with VTK's own reader)
+#   install-deps.sh            what building and testing need (python3-vtk9 and
+#                              python3-numpy, which Debian's VTK bindings use but do not
+#                              pull in: the test that reads pdt's .vtu files with VTK's
+#                              own reader)
 #   install-deps.sh --extras   also what the plot and picture scripts need
 #                              (matplotlib, Xvfb for VTK's offscreen rendering)
 set -euo pipefail
 packages=(build-essential cmake ninja-build pkg-config libtbb-dev libcgal-dev libgmp-dev libmpfr-dev
-          libboost-dev libmimalloc-dev catch2 zlib1g-dev python3-vtk9)
+          libboost-dev libmimalloc-dev catch2 zlib1g-dev python3-vtk9 python3-numpy)
 if [ "${1:-}" = "--extras" ]; then packages+=(python3-matplotlib xvfb xauth); fi
 missing=()
 for p in "${packages[@]}"; do

@@ -12,9 +12,11 @@ import sys
 try:
     import vtk
     from vtk.util.numpy_support import vtk_to_numpy
-except ImportError:
-    print("SKIPPED: VTK's Python bindings are not installed "
-          "(Debian: apt-get install python3-vtk9); .vtu files not read with VTK")
+except ImportError as e:
+    # Debian 12's python3-vtk9 does not depend on numpy, which vtk.util needs.
+    print("SKIPPED: %s: VTK's Python bindings or numpy are not installed "
+          "(Debian: apt-get install python3-vtk9 python3-numpy, or scripts/install-deps.sh); "
+          ".vtu files not read with VTK" % e)
     sys.exit(77)
 
 

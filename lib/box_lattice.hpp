@@ -2,7 +2,8 @@
 #pragma once
 // A box cut into res^3 equal cells: which cell holds a coordinate. The one
 // place pdt scales coordinates to a box (the jump grid's slots, the engine's
-// blocks, the Morton order of a first build).
+// blocks, the Morton order of a first build, the Hilbert keys of a batch's
+// order).
 //
 // Everything is computed on halves (0.5 * c - 0.5 * lo), so no difference
 // overflows even for boxes reaching +-DBL_MAX. A coordinate outside the box,

@@ -12,10 +12,10 @@
 #include <oneapi/tbb/parallel_sort.h>
 
 #include <algorithm>
-#include <cmath>
 #include <numeric>
 #include <utility>
 
+#include "box_lattice.hpp"
 #include "mix64.hpp"
 
 namespace pdt::detail {
@@ -114,13 +114,9 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
     const double c[3] = {p.x, p.y, p.z};
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
   }
-  double scale[3];
-  for (int a = 0; a < 3; ++a) {
-    const double extent = hi[a] - lo[a];
-    if (!std::isfinite(extent)) return cgal_order(points, parallel);  // spans more than a double holds
-    scale[a] = extent > 0 ? static_cast<double>(1u << key_bits) / extent : 0;
-    if (!std::isfinite(scale[a])) return cgal_order(points, parallel);  // a subnormal extent
-  }
+  // A flat or subnormal axis maps to 0 there; a box reaching +-DBL_MAX scales
+  // without overflow (BoxLattice works on halves).
+  const BoxLattice lattice(lo, hi, 1 << key_bits);
   // Keys in the points' order (reading them in the shuffled order would miss
   // the cache at each one), then the shuffle: Fisher-Yates from a fixed seed,
   // so the order (and the vertex ids it hands out) is the same on every run.
@@ -129,8 +125,7 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
     for (std::size_t i = begin; i < end; ++i) {
       const double c[3] = {points[i].x, points[i].y, points[i].z};
       std::uint32_t x[3];
-      for (int a = 0; a < 3; ++a)
-        x[a] = static_cast<std::uint32_t>(std::min((c[a] - lo[a]) * scale[a], static_cast<double>((1u << key_bits) - 1)));
+      for (int a = 0; a < 3; ++a) x[a] = static_cast<std::uint32_t>(lattice.index(a, c[a]));
       items[i] = {hilbert_key(x), static_cast<std::uint32_t>(i)};
     }
   });
@@ -147,7 +142,8 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
       std::sort(items.begin() + static_cast<std::ptrdiff_t>(begin), items.begin() + static_cast<std::ptrdiff_t>(end));
     end = begin;
   }
-  // Keys too coarse for the points (a cluster far smaller than the box): many
+  // Keys too coarse for the points (a cluster far smaller than the box, or a
+  // subnormal box): many
   // distinct points on one key leave them in shuffled order, so walks would
   // get long. Then CGAL's median splits, which adapt to any density.
   // (Copies of one point share their key harmlessly: not counted.)

@@ -6,8 +6,7 @@
 // rounds are CGAL's spatial_sort's (its range insertion's order); the curve
 // is computed on 21-bit keys per axis over the points' bounding box, and
 // CGAL's own median-split sort takes over where those keys cannot tell the
-// points apart (a cluster far smaller than the box) or the box is out of a
-// double's range.
+// points apart (a cluster far smaller than the box).
 #include <cstdint>
 #include <span>
 #include <vector>

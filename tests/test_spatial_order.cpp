@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 // The batch insertion order (lib/spatial_order.cpp): a permutation, the same
 // on every run and in both modes, and local (consecutive points close), for
-// the sets that take its Hilbert keys and for those that fall back to CGAL's
-// median sort (a cluster far smaller than the box, huge or subnormal spans).
+// the sets that take its Hilbert keys (a span reaching +-DBL_MAX included) and
+// for those that fall back to CGAL's median sort (a cluster far smaller than
+// the box, a subnormal span).
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -85,8 +86,8 @@ TEST_CASE("spatial order: a cluster far smaller than the box, huge and subnormal
   for (Point3& p : cluster) p = {0.5 + 1e-9 * p.x, 0.5 + 1e-9 * p.y, 0.5 + 1e-9 * p.z};
   for (Point3 p : generated_points(pdt::Distribution::uniform, 5000, 11))
     cluster.push_back({1000 * p.x, 1000 * p.y, 1000 * p.z});
-  // A span a double cannot hold (hi - lo overflows: CGAL's sort), and a
-  // subnormal one.
+  // A span a double cannot hold (hi - lo overflows; the keys scale halves),
+  // and a subnormal one (no key tells its points apart: CGAL's sort).
   std::vector<Point3> huge = generated_points(pdt::Distribution::uniform, 1000, 9);
   for (Point3& p : huge) p = {(2 * p.x - 1) * 1.5e308, (2 * p.y - 1) * 1.5e308, (2 * p.z - 1) * 1.5e308};
   std::vector<Point3> tiny = generated_points(pdt::Distribution::uniform, 1000, 10);

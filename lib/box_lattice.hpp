@@ -13,6 +13,17 @@
 
 namespace pdt::detail {
 
+// The smallest box holding the coordinates added to it; empty (lo > hi) until
+// the first. The one bounding-box loop of the jump grid and the batch order.
+struct BoundingBox {
+  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL};
+  double hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  void add(double x, double y, double z) {
+    const double c[3] = {x, y, z};
+    for (int a = 0; a < 3; ++a) lo[a] = c[a] < lo[a] ? c[a] : lo[a], hi[a] = c[a] > hi[a] ? c[a] : hi[a];
+  }
+};
+
 struct BoxLattice {
   double half_lo[3] = {0, 0, 0};
   double scale[3] = {0, 0, 0};  // res / half extent; 0 for a flat axis

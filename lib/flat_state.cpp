@@ -9,8 +9,8 @@
 #include <cmath>
 #include <cstring>
 
-#include "box_lattice.hpp"
 #include "fault_injection.hpp"
+#include "spatial_order.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -115,32 +115,18 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
     for (VertexId v : flat)
       if (v != t[0] && v != t[1] && v != t[2]) rest.push_back(v);
     grid = detail::JumpGrid{};  // it names no vertex of the new cells yet
-    // Insert the rest in Morton order, each walk starting from the previous
-    // vertex: short walks without the jump grid, which must not name a vertex
-    // before it is in the triangulation. Usually there is no rest (the 4th
+    // Insert the rest in a batch's order (spatial_order.hpp), each walk
+    // starting from the previous vertex: short walks without the jump grid,
+    // which must not name a vertex before it is in the triangulation. Usually there is no rest (the 4th
     // point raised the dimension): nothing to sort, nothing to allocate.
     if (!rest.empty()) {
-      double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-      for (VertexId v : rest) {
-        const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
-      }
-      const detail::BoxLattice lattice(lo, hi, 1024);
-      auto morton = [&](VertexId v) {
-        const double c[3] = {pt(v).x(), pt(v).y(), pt(v).z()};
-        std::uint64_t key = 0;
-        for (int a = 0; a < 3; ++a) {
-          const auto q = static_cast<std::uint64_t>(lattice.index(a, c[a]));
-          for (int b = 0; b < 10; ++b) key |= ((q >> b) & 1u) << (3 * b + a);
-        }
-        return key;
-      };
-      std::vector<std::pair<std::uint64_t, VertexId>> order;
-      order.reserve(rest.size());
-      for (VertexId v : rest) order.emplace_back(morton(v), v);
-      std::sort(order.begin(), order.end());
+      std::vector<Point3> points;
+      points.reserve(rest.size());
+      for (VertexId v : rest) points.push_back({pt(v).x(), pt(v).y(), pt(v).z()});
+      const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
       VertexId prev = apex;
-      for (auto [key, v] : order) {
+      for (const std::uint32_t k : order) {
+        const VertexId v = rest[k];
         bool outside = false;
         CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
         gather_conflict_zone(ctx, pt(v), c);

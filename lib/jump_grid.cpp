@@ -68,7 +68,7 @@ VertexId JumpGrid::lookup(const KPoint& p) const {
 }
 
 JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, bool follow_vertices) {
-  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+  BoundingBox box;
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
   // so it goes back to the OS at once: malloc'd vectors of this size tend to
@@ -91,8 +91,7 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
     if (verts[v].multiplicity == 0) continue;
     ids[n++] = v;
     const KPoint& p = verts[v].p;
-    const double c[3] = {p.x(), p.y(), p.z()};
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+    box.add(p.x(), p.y(), p.z());
   }
   const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);
   // About `per_slot` vertices per slot, 2 unless the cap asks for more: few
@@ -122,7 +121,7 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
     // Not following the vertices: the root is the only node, a leaf of about
     // `want` equal slots.
     const bool root_leaf = !follow_vertices || is_leaf(n, 0);
-    g.lattice = BoxLattice(lo, hi,
+    g.lattice = BoxLattice(box.lo, box.hi,
                            !follow_vertices ? std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want))))
                                             : static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
     // Breadth first, so that a node's children are consecutive; queue[i]

@@ -109,14 +109,11 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   // sorted and the first 1/4 again split the same way, down to 16 points.
   const std::size_t n = points.size();
   if (n < 64) return cgal_order(points, parallel);
-  double lo[3] = {points[0].x, points[0].y, points[0].z}, hi[3] = {lo[0], lo[1], lo[2]};
-  for (const Point3& p : points) {
-    const double c[3] = {p.x, p.y, p.z};
-    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
-  }
+  BoundingBox box;
+  for (const Point3& p : points) box.add(p.x, p.y, p.z);
   // A flat or subnormal axis maps to 0 there; a box reaching +-DBL_MAX scales
   // without overflow (BoxLattice works on halves).
-  const BoxLattice lattice(lo, hi, 1 << key_bits);
+  const BoxLattice lattice(box.lo, box.hi, 1 << key_bits);
   // Keys in the points' order (reading them in the shuffled order would miss
   // the cache at each one), then the shuffle: Fisher-Yates from a fixed seed,
   // so the order (and the vertex ids it hands out) is the same on every run.

@@ -447,10 +447,10 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   return first;
 }
 
-InsertResult Engine::insertion_result(Ticket t) const { return state_->tickets.result(t); }
+InsertResult Engine::insertion_result(Ticket t) const { return state_->tickets.result(t, state_->impl.verts); }
 
 void Engine::remove_insertion(Ticket t, Callback done) {
-  const detail::TicketView view = state_->tickets.claim_undo(t);
+  const detail::TicketView view = state_->tickets.claim_undo(t, state_->impl.verts);
   try {
     state_->submit(state_->make_undo(t, view, std::move(done), nullptr));
   } catch (...) {
@@ -468,7 +468,7 @@ void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
   std::vector<detail::TicketView> views(batch.size());
   for (std::size_t i = 0; i < batch.size(); ++i) {
     try {
-      views[i] = e.tickets.claim_undo(batch[i]);
+      views[i] = e.tickets.claim_undo(batch[i], e.impl.verts);
     } catch (...) {
       for (std::size_t j = 0; j < i; ++j) e.tickets.unclaim_undo(batch[j]);
       throw;

@@ -132,7 +132,7 @@ std::uint64_t TicketTable::issue(std::uint64_t n) {
   return first;
 }
 
-TicketView TicketTable::claim_undo(std::uint64_t t) {
+TicketView TicketTable::claim_undo(std::uint64_t t, const StableArray<VertexRec>& verts) {
   if (t >= next_.load(std::memory_order_acquire)) unknown(t, "no such insertion was submitted");
   Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
@@ -144,6 +144,11 @@ TicketView TicketTable::claim_undo(std::uint64_t t) {
     s.erase(slot);
     live_.fetch_sub(1, std::memory_order_relaxed);
     unknown(t, "that insertion failed");
+  }
+  if (vertex_gone(*slot, verts)) {
+    s.erase(slot);
+    live_.fetch_sub(1, std::memory_order_relaxed);
+    unknown(t, "its vertex was removed meanwhile (by handle or id)");
   }
   slot->undone = true;
   return {slot->state, slot->vertex, slot->stamp};
@@ -210,13 +215,13 @@ void TicketTable::release(std::uint64_t t) {
   }
 }
 
-InsertResult TicketTable::result(std::uint64_t t) const {
+InsertResult TicketTable::result(std::uint64_t t, const StableArray<VertexRec>& verts) const {
   if (t >= next_.load(std::memory_order_acquire))
     throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) + " was never submitted");
   const Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
   const Slot* slot = s.find(t);
-  if (!slot)
+  if (!slot || (!slot->undone && vertex_gone(*slot, verts)))
     throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) +
                                                  " was released: it was undone, or its vertex was removed");
   switch (slot->state) {
@@ -242,8 +247,7 @@ void TicketTable::sweep_if_large(const StableArray<VertexRec>& verts, std::uint6
       Slot& slot = s.slots[i];
       // A done insertion whose vertex incarnation is gone can no longer be
       // undone by ticket (an undo claimed for it will fail on its own).
-      const bool dead = slot.key != 0 && slot.state == TicketState::inserted && !slot.undone &&
-                        verts[slot.vertex].stamp.load(std::memory_order_relaxed) != slot.stamp;
+      const bool dead = slot.key != 0 && !slot.undone && vertex_gone(slot, verts);
       if (dead) {
         s.erase(&slot);  // the next entry may have shifted into i: look at i again
         ++erased;

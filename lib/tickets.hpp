@@ -54,9 +54,10 @@ class TicketTable {
   void prefetch(std::uint64_t t) const;
 
   // Claims the undo of t; throws pdt::Error(unknown_vertex) for a ticket
-  // never issued, released, already undone, or whose insertion failed (that
-  // one is then released). unclaim gives a claim back.
-  TicketView claim_undo(std::uint64_t t);
+  // never issued, released, already undone, or whose insertion failed or
+  // whose vertex is gone (those two are then released). unclaim gives a
+  // claim back.
+  TicketView claim_undo(std::uint64_t t, const StableArray<VertexRec>& verts);
   void unclaim_undo(std::uint64_t t);
   // The state of t for an undo about to run (t was claimed, so it exists).
   TicketView view(std::uint64_t t) const;
@@ -70,8 +71,9 @@ class TicketTable {
   void release(std::uint64_t t);
   // The outcome of a finished insertion (rethrows its error); throws
   // pdt::Error(invalid_argument) if t was never issued, is not finished, or
-  // was released.
-  InsertResult result(std::uint64_t t) const;
+  // was released (its vertex is gone: released, though a sweep may not have
+  // erased its slot yet).
+  InsertResult result(std::uint64_t t, const StableArray<VertexRec>& verts) const;
   // Erases the done slots whose vertex incarnation is gone, if the table has
   // grown well past `live_vertices`.
   void sweep_if_large(const StableArray<VertexRec>& verts, std::uint64_t live_vertices);
@@ -117,6 +119,12 @@ class TicketTable {
   Shard& shard(std::uint64_t t) { return shards_[t % shard_count]; }
   const Shard& shard(std::uint64_t t) const { return shards_[t % shard_count]; }
   [[noreturn]] static void unknown(std::uint64_t t, const char* why);
+  // A done insertion whose vertex incarnation is gone (removed by handle or
+  // id, perhaps the id reused since): its ticket is released, whether or not
+  // a sweep has erased the slot yet.
+  static bool vertex_gone(const Slot& slot, const StableArray<VertexRec>& verts) {
+    return slot.state == TicketState::inserted && verts[slot.vertex].stamp.load(std::memory_order_relaxed) != slot.stamp;
+  }
   Shard shards_[shard_count];
   std::atomic<std::uint64_t> next_{0};
   std::atomic<std::uint64_t> live_{0};

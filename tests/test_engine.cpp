@@ -808,6 +808,50 @@ TEST_CASE("engine: insert_batch gives CGAL's triangulation; tickets follow the b
   }
 }
 
+TEST_CASE("engine: a ticket is released once its vertex is removed by id or handle", "[engine]") {
+  pdt::Triangulation t;
+  insert_all(t, random_points(200, 17));
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(2));
+    const Point3 p{0.2, 0.3, 0.4}, q{0.6, 0.7, 0.8};
+    const auto tp = e.insert(p, {});
+    const auto tq = e.insert(q, {});
+    const auto tb = e.insert_batch(std::vector<Point3>{{0.15, 0.25, 0.35}, {0.45, 0.55, 0.65}});
+    e.drain();
+    const pdt::InsertResult rp = e.insertion_result(tp), rq = e.insertion_result(tq);
+    const pdt::InsertResult rb = e.insertion_result(tb + 1);
+    e.remove(rp.vertex, {});    // by id
+    e.remove(rq.handle(), {});  // by handle
+    e.remove(rb.handle(), {});
+    e.drain();
+    // The same point again: a new incarnation, perhaps with the old id.
+    const auto tp2 = e.insert(p, {});
+    e.drain();
+    REQUIRE(e.insertion_result(tp2).inserted);
+    for (auto gone : {tp, tq, tb + 1}) {
+      std::string msg;
+      REQUIRE(error_of([&] { (void)e.insertion_result(gone); }, &msg) == pdt::ErrorCode::invalid_argument);
+      REQUIRE(msg.find("released") != std::string::npos);
+      REQUIRE(error_of([&] { e.remove_insertion(gone); }, &msg) == pdt::ErrorCode::unknown_vertex);
+      REQUIRE(msg.find("removed") != std::string::npos);
+      REQUIRE(error_of([&] { e.remove_insertion(gone); }) == pdt::ErrorCode::unknown_vertex);  // and stays so
+    }
+    // A batch of undos naming one released ticket undoes nothing.
+    const std::vector<pdt::Engine::Ticket> mixed{tb, tb + 1};
+    REQUIRE(error_of([&] { e.remove_insertions(mixed); }) == pdt::ErrorCode::unknown_vertex);
+    e.drain();
+    REQUIRE(e.insertion_result(tb).inserted);  // still there, still undoable
+    // The new incarnation was never touched by the refused undos.
+    REQUIRE(t.is_vertex(e.insertion_result(tp2).handle()));
+    e.remove_insertion(tb, {});
+    e.remove_insertion(tp2, {});
+    e.drain();
+  });
+  REQUIRE(t.number_of_vertices() == 200);
+  require_valid(t);
+}
+
 TEST_CASE("engine: remove_insertions undoes a batch, all or nothing", "[engine][tsan]") {
   const std::vector<Point3> pts = random_points(scaled(10000, 1500), 98);
   for (unsigned threads : {1u, 8u}) {

@@ -25,6 +25,7 @@ InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
     VertexWrite hold(*this, ctx, w);
     ++verts[w].multiplicity;
     ++ctx.stats.duplicates;
+    ++ctx.stats.insertions;
     return {w, false};
   }
   const bool raises_to_3d = basis.dimension() == 2 && basis.raises(p);
@@ -49,7 +50,10 @@ InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
     flat_index.insert(v, verts);
     if (basis.offer(v, pt(v))) dim = basis.dimension();
   }
-  end_report(ctx, OpKind::insert, v, verts[v].stamp.load(std::memory_order_relaxed));
+  // Done: counted and folded before the hook hears of it, so a hook that
+  // throws leaves the counts true (finish_change folds them either way).
+  ++ctx.stats.insertions;
+  finish_change(ctx, OpKind::insert, v, verts[v].stamp.load(std::memory_order_relaxed));
   return {v, true};
 }
 

@@ -42,11 +42,9 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   }
   if (dim.load(std::memory_order_acquire) < 3) {
     if (ctx.locking) return OpStatus::needs_global;
-    out.result = insert_flat(ctx, p);
+    out.result = insert_flat(ctx, p);  // counts, folds and reports
     out.stamp = verts[out.result.vertex].stamp.load(std::memory_order_relaxed);
     out.result.incarnation = out.stamp;
-    ++ctx.stats.insertions;
-    fold_counters(ctx);
     return OpStatus::done;
   }
   auto rollback = [&] {

@@ -950,3 +950,44 @@ TEST_CASE("insert_batch with a NaN anywhere inserts nothing", "[insert][error]")
   REQUIRE(canonical_tets(t, base) == before);
   REQUIRE(t.insert_batch({}).empty());
 }
+
+TEST_CASE("a change hook that throws: the operation is done and the counts stay true in every dimension",
+          "[insert][remove][hook]") {
+  // changes.hpp: the sequential triangulation lets the hook's exception out
+  // of insert/remove, the operation being done. Through dimensions 0..3 and
+  // back, with duplicates.
+  pdt::Triangulation t;
+  int thrown = 0;
+  t.set_change_hook([](const pdt::Changes&) { throw std::runtime_error("hook"); });
+  const std::vector<Point3> pts{{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 1, 1}, {1, 0, 0}};
+  auto check = [&](std::size_t expected) {
+    std::string why;
+    REQUIRE(t.validate(&why));
+    REQUIRE(t.number_of_vertices() == expected);
+    REQUIRE(t.vertices().size() == expected);
+  };
+  std::size_t distinct = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const bool fresh = i + 1 < pts.size();  // the last one is a duplicate (no report, nothing thrown)
+    try {
+      t.insert(pts[i]);
+    } catch (const std::runtime_error&) {
+      ++thrown;
+    }
+    distinct += fresh;
+    check(distinct);
+  }
+  REQUIRE(t.dimension() == 3);
+  REQUIRE(thrown == 7);
+  while (t.number_of_vertices() > 0) {
+    const pdt::VertexId v = t.vertices().front();
+    const std::uint32_t mult = t.multiplicity(v);
+    try {
+      t.remove(v);
+    } catch (const std::runtime_error&) {
+      ++thrown;
+    }
+    check(mult > 1 ? distinct : --distinct);
+  }
+  REQUIRE(t.dimension() == -1);
+}

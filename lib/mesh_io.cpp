@@ -42,6 +42,22 @@ void check_indices(const Mesh& mesh, const char* who) {
                                                      std::to_string(n) + " points");
 }
 
+// A field name as an XML attribute value: & < > " ' escaped, so that any
+// name gives a file XML parsers (ParaView's) read, and reads back as given.
+std::string xml_attribute(const std::string& s) {
+  std::string out;
+  out.reserve(s.size());
+  for (char c : s) switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      case '\'': out += "&apos;"; break;
+      default: out += c;
+    }
+  return out;
+}
+
 }  // namespace
 
 Mesh extract_mesh(const Triangulation& t) {
@@ -230,7 +246,7 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, 
   auto header = [&](std::size_t k) {
     const Array& a = arrays[k];
     std::string s = std::string("<DataArray type=\"") + a.type + "\"";
-    if (!a.name.empty()) s += " Name=\"" + a.name + "\"";
+    if (!a.name.empty()) s += " Name=\"" + xml_attribute(a.name) + "\"";
     if (a.components != 1) s += " NumberOfComponents=\"" + std::to_string(a.components) + "\"";
     if (encoding == VtuEncoding::ascii) return s + " format=\"ascii\">\n";
     return s + " format=\"appended\" offset=\"" + std::to_string(offset_of[k]) + "\"/>\n";
@@ -264,7 +280,7 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, 
   }
   out.put("      </Cells>\n");
   if (!cell_fields.empty()) {
-    out.put("      <CellData Scalars=\"" + cell_fields.front().name + "\">\n");
+    out.put("      <CellData Scalars=\"" + xml_attribute(cell_fields.front().name) + "\">\n");
     for (std::size_t k = 4; k < arrays.size(); ++k) {
       out.put("        " + header(k));
       body(out, k);

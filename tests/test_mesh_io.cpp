@@ -389,6 +389,13 @@ TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {
   CHECK(x.size() > 5 * 3);
   CHECK(x.substr(x.size() - 11) == "</VTKFile>\n");
   CHECK(d.entries() == 1);
+
+  // A field's name is an XML attribute: any characters, escaped.
+  const std::vector<pdt::CellField> fields{{"quality \"<a&b>\" 'q'", {0.5, 0.25}}};
+  pdt::write_vtu(p, m, pdt::VtuEncoding::ascii, fields);
+  const std::string y = pdt_test::read_file(p);
+  CHECK(y.find("Name=\"quality &quot;&lt;a&amp;b&gt;&quot; &apos;q&apos;\" format=\"ascii\">") != std::string::npos);
+  CHECK(y.find("<a&b>") == std::string::npos);
 }
 
 // Decodes one appended DataArray of a .vtu written by write_vtu (raw or zlib,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <string>
 #include <type_traits>
 
@@ -20,10 +21,15 @@ bool env_number(const char* name, T& field) {
   char* end = nullptr;
   double v = std::strtod(s, &end);
   bool ok = end && *end == '\0' && std::isfinite(v) && v >= 0;
-  if constexpr (std::is_integral_v<T>) ok = ok && v == std::floor(v) && v <= 1e12;
+  std::string expected = "a non-negative number";
+  if constexpr (std::is_integral_v<T>) {  // whole, and in T's range: no silent wrap
+    const double most = std::min(1e12, static_cast<double>(std::numeric_limits<T>::max()));
+    ok = ok && v == std::floor(v) && v <= most;
+    expected = "a whole number from 0 to " + std::to_string(static_cast<unsigned long long>(most));
+  }
   if (!ok)
     throw Error(ErrorCode::invalid_argument,
-                std::string(name) + "='" + s + "' is not a valid value (expected a non-negative number)");
+                std::string(name) + "='" + s + "' is not a valid value (expected " + expected + ")");
   field = static_cast<T>(v);
   return true;
 }

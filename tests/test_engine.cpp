@@ -1019,7 +1019,10 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     const std::pair<const char*, const char*> bad[] = {
         {"PDT_THREADS", "abc"},          {"PDT_THREADS", "-1"},        {"PDT_THREADS", "2.5"},
         {"PDT_BLOCKS_PER_AXIS", "4x"},   {"PDT_CONTENTION_LOW", "nan"}, {"PDT_CONTENTION_HIGH", "-0.5"},
-        {"PDT_CONTENTION_WINDOW", "1e99"}, {"PDT_GRID_SLOTS", " "},     {"PDT_CONTENTION_LOW", "inf"}};
+        {"PDT_CONTENTION_WINDOW", "1e99"}, {"PDT_GRID_SLOTS", " "},     {"PDT_CONTENTION_LOW", "inf"},
+        // Past the field's range (32 bits): refused, not wrapped to 1 or 0.
+        {"PDT_WORKERS", "4294967297"},   {"PDT_CONTENTION_WINDOW", "4294967296"},
+        {"PDT_ESCALATE_AFTER", "4294967360"}, {"PDT_BLOCKS_PER_AXIS", "4294967300"}};
     for (const auto& [name, value] : bad) {
       EnvGuard env;
       env.set(name, value);

@@ -45,9 +45,9 @@ Triangulation::Triangulation(Triangulation&& o) {
 }
 
 Triangulation& Triangulation::operator=(Triangulation&& o) {
-  if (this == &o) return *this;
-  require_detached(*impl_, "move assignment");
+  require_detached(*impl_, "move assignment");  // before the self check: refused however it is called
   require_detached(*o.impl_, "move assignment");
+  if (this == &o) return *this;
   auto fresh = std::make_unique<Impl>();
   impl_ = std::move(o.impl_);
   o.impl_ = std::move(fresh);

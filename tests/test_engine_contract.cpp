@@ -178,6 +178,10 @@ TEST_CASE("contract: an attached triangulation refuses mutation, and a second en
       pdt::Triangulation other;
       t = std::move(other);
     });
+    refused([&] {
+      pdt::Triangulation& same = t;  // a self move too: refused like any other
+      t = std::move(same);
+    });
     REQUIRE(error_of([&] { pdt::Engine second(t, kUnit, options_with(2)); }, &why) ==
             pdt::ErrorCode::invalid_argument);
     REQUIRE(why.find("another Engine is attached") != std::string::npos);

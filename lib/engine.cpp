@@ -58,6 +58,9 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   workers.reserve(nworkers);
   for (unsigned i = 0; i < nworkers; ++i) {
     workers.push_back(std::make_unique<Worker>(i, impl.new_context_id(), opts));
+    // One worker: nothing runs beside it but global steps, which wait for it
+    // to pause, and outside readers of vertices (OpContext::alone).
+    workers.back()->ctx->alone = workers.back()->ctx->outside_readers = nworkers == 1;
     workers.back()->spare = records.acquire();
   }
   kernel_hook = [this](const Changes& c) {

@@ -29,8 +29,15 @@ struct OpContext {
   // EngineState): its global steps run with no operation beside them, but a
   // thread outside operations may be reading a vertex under a shared lock
   // (read_vertex), so it writes a vertex only holding its lock word
-  // (Impl::VertexWrite). Invariant: true only if !locking.
+  // (Impl::VertexWrite). Invariant: true only if !locking, or alone.
   bool outside_readers = false;
+  // The one context that runs operations (an engine with one worker, whose
+  // global steps run while it is paused): no other context reads or writes
+  // cells, so its try-locks succeed without touching the lock words, and,
+  // as outside_readers says, it writes a vertex holding its word against
+  // read_vertex. Invariant: alone implies locking and outside_readers (its
+  // operations keep the engine's semantics: needs_global, no flat insertion).
+  bool alone = false;
 
   // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
   // Invariant: free_cells / free_vertices list ids this context may reuse;

@@ -5,7 +5,8 @@
 //   -(owner)   held exclusively by the context whose id is owner
 // A context records what it holds (held_shared, held_exclusive) so that it
 // can release everything at once, on success or on a rollback. With a
-// non-locking context (the sequential triangulation) every call succeeds.
+// non-locking context (the sequential triangulation), or one that is alone
+// (OpContext::alone: an engine's only worker), every call succeeds at once.
 // The infinite vertex is never locked. Room in the record is made before the
 // lock word changes, so a failed allocation never leaves a lock nobody holds.
 #include <algorithm>
@@ -20,7 +21,7 @@ namespace pdt {
 using detail::OpContext;
 
 bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
-  if (!ctx.locking || v == 0) return true;
+  if (!ctx.locking || ctx.alone || v == 0) return true;
   std::atomic<std::int32_t>& w = verts[v].lock;
   std::int32_t cur = w.load(std::memory_order_relaxed);
   if (cur == -static_cast<std::int32_t>(ctx.id)) return true;
@@ -43,7 +44,7 @@ bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
 }
 
 bool Triangulation::Impl::lock_exclusive(OpContext& ctx, VertexId v) {
-  if (!ctx.locking || v == 0) return true;
+  if (!ctx.locking || ctx.alone || v == 0) return true;
   std::atomic<std::int32_t>& w = verts[v].lock;
   const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
   std::int32_t cur = w.load(std::memory_order_relaxed);
@@ -74,9 +75,10 @@ bool Triangulation::Impl::lock_cell_exclusive(OpContext& ctx, CellId c) {
 }
 
 void Triangulation::Impl::VertexWrite::take(std::atomic<std::int32_t>& word, const OpContext& ctx) {
-  assert(!ctx.locking);
-  // No operation runs beside a global step, so the word is 0 or held shared
-  // by readers that let go within a few loads. (Held exclusively it can only
+  assert(!ctx.locking || ctx.alone);
+  // No operation runs beside a global step, or beside a context that is
+  // alone, so the word is 0 or held shared by readers that let go within a
+  // few loads. (Held exclusively it can only
   // be by a context outside any operation, as a test does to force an
   // escalation; no reader reads it then either, so it is written as it is.)
   const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);

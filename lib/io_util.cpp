@@ -13,6 +13,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 
 namespace pdt::detail {
@@ -292,12 +293,33 @@ void FdWriter::flush() {
 
 // ---- OutputFile -------------------------------------------------------------
 
-OutputFile::OutputFile(const std::string& path) : path_(path) {
+OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
+  struct stat st;
+  if (::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+    char* resolved = ::realpath(path.c_str(), nullptr);
+    if (resolved) {
+      target_ = resolved;
+      std::free(resolved);
+    } else {
+      direct_ = true;  // dangling (or looping) link: open follows it, or says why not
+    }
+  }
+  // /dev/stdout and the like name a descriptor another process opened: a
+  // rename would swap the file from under it, so they are written in place.
+  for (const char* special : {"/dev/", "/proc/"})
+    if (path.rfind(special, 0) == 0 || target_.rfind(special, 0) == 0) direct_ = true;
+  if (!direct_ && ::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) direct_ = true;
+  if (direct_) {
+    fd_ = ::open(target_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd_ < 0) throw_io_error("cannot open", path, errno);
+    writer_ = new FdWriter(fd_, path);
+    return;
+  }
   // Unique name in the target's directory: pid + per-process counter; O_EXCL
   // makes a collision with a stale file from another process retry.
   static std::atomic<unsigned> counter{0};
   for (int attempt = 0; attempt < 100; ++attempt) {
-    temp_ = path + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter.fetch_add(1));
+    temp_ = target_ + ".tmp." + std::to_string(::getpid()) + "." + std::to_string(counter.fetch_add(1));
     // 0666 & ~umask, as a plain fopen would create it (mkstemp would give 0600).
     fd_ = ::open(temp_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     if (fd_ >= 0) break;
@@ -341,7 +363,11 @@ void OutputFile::finish() {
 void OutputFile::commit() {
   if (committed_) return;
   finish();
-  if (::rename(temp_.c_str(), path_.c_str()) != 0) {
+  if (direct_) {
+    committed_ = true;
+    return;
+  }
+  if (::rename(temp_.c_str(), target_.c_str()) != 0) {
     int err = errno;
     discard();
     throw_io_error("cannot rename the temporary file onto", path_, err);

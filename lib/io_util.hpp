@@ -112,6 +112,10 @@ class FdWriter {
 // target. Until commit() succeeds nothing exists under the target name; if any
 // step fails, or the object is destroyed without commit(), the temporary file
 // is removed. Errors are io_failure naming the target path.
+// The target is what the path names: through a symbolic link, the file it
+// points to (the link stays); a device, FIFO or socket (/dev/null, a pipe) is
+// written in place, since no rename could stand in for it, and so is the
+// file behind a dangling link. Those direct writes cannot be undone.
 class OutputFile {
  public:
   explicit OutputFile(const std::string& path);
@@ -129,7 +133,8 @@ class OutputFile {
 
  private:
   void discard() noexcept;
-  std::string path_, temp_;
+  std::string path_, target_, temp_;  // target_: the file renamed onto (symbolic links resolved)
+  bool direct_ = false;               // writing the target itself (not a regular file)
   int fd_ = -1;
   FdWriter* writer_ = nullptr;
   bool finished_ = false, committed_ = false;

@@ -13,6 +13,9 @@
 #include <tuple>
 #include <vector>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include "common/io_test_util.hpp"
@@ -396,6 +399,37 @@ TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {
   const std::string y = pdt_test::read_file(p);
   CHECK(y.find("Name=\"quality &quot;&lt;a&amp;b&gt;&quot; &apos;q&apos;\" format=\"ascii\">") != std::string::npos);
   CHECK(y.find("<a&b>") == std::string::npos);
+}
+
+TEST_CASE("writers write through a symbolic link and into a FIFO, replacing neither", "[io]") {
+  TempDir d;
+  pdt::Mesh m;
+  m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  m.tets = {{0, 1, 2, 3}};
+  std::filesystem::create_directory(d.path() / "real");
+  const std::string target = d.file("real/mesh.vtu"), link = d.file("link.vtu");
+  std::filesystem::create_symlink(target, link);
+  pdt::write_vtu(link, m, pdt::VtuEncoding::ascii);
+  CHECK(std::filesystem::is_symlink(link));
+  CHECK(pdt_test::read_file(target).find("NumberOfCells=\"1\"") != std::string::npos);
+  CHECK(std::distance(std::filesystem::directory_iterator(d.path() / "real"), {}) == 1);  // no temporary left
+
+  // A FIFO is written in place (a rename would replace it with a file). The
+  // reader end is opened first, without blocking, so the writer's open does
+  // not wait; the file (under 2 KiB) fits the pipe's buffer.
+  const std::string fifo = d.file("pipe.vtu");
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const int rd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  REQUIRE(rd >= 0);
+  pdt::write_vtu(fifo, m, pdt::VtuEncoding::ascii);
+  std::string got;
+  char buf[4096];
+  for (ssize_t n; (n = ::read(rd, buf, sizeof buf)) > 0;) got.append(buf, static_cast<std::size_t>(n));
+  ::close(rd);
+  CHECK(std::filesystem::is_fifo(fifo));
+  REQUIRE(got.size() > 11);
+  CHECK(got.find("NumberOfCells=\"1\"") != std::string::npos);
+  CHECK(got.substr(got.size() - 11) == "</VTKFile>\n");
 }
 
 // Decodes one appended DataArray of a .vtu written by write_vtu (raw or zlib,

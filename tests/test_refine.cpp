@@ -162,4 +162,21 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   INFO("stdout:\n" << r.out);
   CHECK(r.code == 1);  // the bounds are missed
   CHECK(r.out.find("the point budget of 2,000 was hit") != std::string::npos);
+  // A budget below the starting lattice (here 17 points: the corners and 9
+  // seeds), or below the corners, stops it before any refinement: still
+  // unfinished, still said, and never more points than the budget.
+  for (const char* budget : {"12", "5"}) {
+    const Result small = run_pdt(d, std::string("refine --domain torus --size 0.2 --threads 2 --budget ") + budget);
+    INFO("stdout:\n" << small.out);
+    CHECK(small.code == 1);
+    CHECK(small.out.find(std::string("the point budget of ") + budget + " was hit") != std::string::npos);
+    const std::size_t at = small.out.find("insertions");
+    REQUIRE(at != std::string::npos);
+    CHECK(std::stoul(small.out.substr(small.out.find_first_of("0123456789", at))) <= std::stoul(budget));
+  }
+  // The surface samples that do not fit the budget: the same.
+  const Result samples = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 528");
+  INFO("stdout:\n" << samples.out);
+  CHECK(samples.code == 1);
+  CHECK(samples.out.find("the point budget of 528 was hit") != std::string::npos);
 }

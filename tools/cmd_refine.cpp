@@ -46,7 +46,8 @@ const char* const refine_usage =
     "  --trace FILE    write the operations carried out as a stream (.ops), which\n"
     "                  `pdt run FILE --threads N` replays\n"
     "  --validate      check every invariant of the final triangulation\n"
-    "Exit status: 0 done, 1 a bound is missed (the budget was hit) or validation failed, 2 error.\n";
+    "Exit status: 0 done, 1 a bound is missed, the budget stopped it unfinished, or validation\n"
+    "failed, 2 error.\n";
 
 namespace {
 
@@ -171,9 +172,12 @@ int cmd_refine(Args args) {
     row("bounds", format_count(q.violations) + " tets with their circumcentre inside (out of the protected layer) miss a bound" +
                       (st.budget_hit ? " (the point budget of " + format_count(o.budget) + " was hit)" : ""));
     status = 1;
+  } else if (st.budget_hit) {  // an unfinished refinement: the bounds hold only on what it judged
+    row("bounds", "unfinished: the point budget of " + format_count(o.budget) +
+                      " was hit (met by the tets there are, which are not a refined mesh)");
+    status = 1;
   } else {
-    row("bounds", std::string("met by every tet whose circumcentre is inside, out of the protected layer") +
-                      (st.budget_hit ? " (the point budget was hit)" : ""));
+    row("bounds", std::string("met by every tet whose circumcentre is inside, out of the protected layer"));
   }
   row("peak memory", format_megabytes(pdt::support::peak_rss_bytes()));
   const pdt::WorkerStats w = st.engine.total();

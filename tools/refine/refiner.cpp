@@ -5,7 +5,10 @@
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include <unistd.h>
 #include <algorithm>
+#include <cstring>
+#include <cerrno>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -66,16 +69,25 @@ class CellTable {
 // that order and removals naming them.
 class Trace {
  public:
-  explicit Trace(const std::string& path, const pdt::Box& box) : path_(path) {
+  // Written to a temporary file beside `path`, renamed onto it by close():
+  // a run that fails (a full disk, an error) leaves no partial trace and
+  // keeps an older file of that name as it was.
+  explicit Trace(const std::string& path, const pdt::Box& box)
+      : path_(path), temp_(path.empty() ? std::string() : path + ".tmp." + std::to_string(::getpid())) {
     if (path.empty()) return;
-    f_ = std::fopen(path.c_str(), "w");
-    if (!f_) throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path + "'");
+    f_ = std::fopen(temp_.c_str(), "w");
+    if (!f_)
+      throw pdt::Error(pdt::ErrorCode::io_failure,
+                       "cannot write the trace '" + path + "': " + std::strerror(errno));
     std::fprintf(f_, "# pdt refine trace: the operations carried out, in an order they happened\n");
     std::fprintf(f_, "box %.17g %.17g %.17g %.17g %.17g %.17g\n", box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y,
                  box.hi.z);
   }
   ~Trace() {
-    if (f_) std::fclose(f_);
+    if (f_) {  // not closed: the run failed
+      std::fclose(f_);
+      std::remove(temp_.c_str());
+    }
   }
   void inserted(std::uint64_t incarnation, const Point3& p) {
     if (!f_) return;
@@ -107,15 +119,16 @@ class Trace {
   void close() {
     if (!f_) return;
     const bool bad = std::ferror(f_) != 0;
-    if (std::fclose(f_) != 0 || bad) {
-      f_ = nullptr;
+    const bool closed = std::fclose(f_) == 0;
+    f_ = nullptr;
+    if (!closed || bad || std::rename(temp_.c_str(), path_.c_str()) != 0) {
+      std::remove(temp_.c_str());
       throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path_ + "' (disk full?)");
     }
-    f_ = nullptr;
   }
 
  private:
-  std::string path_;
+  std::string path_, temp_;
   std::FILE* f_ = nullptr;
   std::mutex m_;
   std::uint64_t next_ = 0;
@@ -265,6 +278,7 @@ class Refiner {
   void start() {
     const pdt::Box& b = o_.domain.box;
     for (int k = 0; k < 8; ++k) {
+      if (!within_budget(1)) return;
       corners_[k] = {k & 1 ? b.hi.x : b.lo.x, k & 2 ? b.hi.y : b.lo.y, k & 4 ? b.hi.z : b.lo.z};
       insertions_.fetch_add(1);
       corner_now_.store(k);
@@ -282,9 +296,18 @@ class Refiner {
           const Point3 p{x + jitter(rng), y + jitter(rng), z + jitter(rng)};
           if (o_.domain.f(p) < -o_.size) seeds.push_back(p);  // well inside: clear of the surface
         }
+    if (!within_budget(seeds.size())) return;
     insertions_.fetch_add(seeds.size());
     e_.insert_batch(seeds);
     e_.drain();
+  }
+  // Whether n more points fit the budget; if not, the run stops here, saying
+  // the budget was hit.
+  bool within_budget(std::uint64_t n) {
+    if (insertions_.load() + n <= o_.budget) return true;
+    budget_hit_.store(true);
+    stop_.store(true);
+    return false;
   }
   // The surface samples no refinement step has asked for yet: all at once.
   // Each one's insertion removes the vertices inside its protecting ball (the
@@ -293,7 +316,7 @@ class Refiner {
     std::vector<Point3> rest;
     for (std::uint32_t i = 0; i < samples_.size(); ++i)
       if (samples_.claim(i)) rest.push_back(samples_[i]);
-    if (rest.empty() || insertions_.load() + rest.size() > o_.budget) return 0;
+    if (rest.empty() || !within_budget(rest.size())) return 0;
     insertions_.fetch_add(rest.size());
     samples_inserted_.fetch_add(rest.size());
     e_.insert_batch(rest);

@@ -88,6 +88,26 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
       CHECK(r.err.find("usage: pdt") != std::string::npos);
     }
   }
+  SECTION("a stream without a box, piped to the engine") {
+    // The engine needs the domain first; without a box line the stream is
+    // read twice, which a pipe cannot be: refused, saying what to do. With
+    // a box line, or sequentially, the pipe is fine.
+    pdt::OpStream s;
+    for (int i = 0; i < 50; ++i) s.ops.push_back({pdt::Operation::Kind::insert, {0.02 * i, 0.5, 0.03 * (i % 7)}, 0});
+    const std::string no_box = d.file("no_box.ops"), with_box = d.file("with_box.ops");
+    pdt::write_ops(no_box, s);
+    s.box = pdt::Box{{0, 0, 0}, {1, 1, 1}};
+    pdt::write_ops(with_box, s);
+    const Result r = run_pdt(d, "run /dev/stdin --threads 2", no_box);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("'box x0 y0 z0 x1 y1 z1' line") != std::string::npos);
+    for (const std::string& ok : {std::string("run /dev/stdin"), std::string("run /dev/stdin --threads 2")}) {
+      const Result fine = run_pdt(d, ok, ok.find("threads") != std::string::npos ? with_box : no_box);
+      INFO(ok << "\n" << fine.err);
+      CHECK(fine.code == 0);
+      CHECK(fine.out.find("50 (0 duplicates)") != std::string::npos);
+    }
+  }
   SECTION("help") {
     for (const char* args : {"--help", "-h", "help", "help run", "gen --help", "run --help", "check --help"}) {
       INFO(args);

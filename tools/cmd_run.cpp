@@ -4,6 +4,7 @@
 // the sequential kernel or the parallel engine; then prints a summary.
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <atomic>
@@ -178,6 +179,14 @@ struct EngineRun {
 // stream) its points' bounding box.
 pdt::Box stream_box(const std::string& path, const std::optional<pdt::Box>& declared) {
   if (declared) return *declared;
+  // Without a box line the stream is read twice, first for its points' box:
+  // a pipe cannot be.
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
+    throw pdt::Error(pdt::ErrorCode::invalid_argument,
+                     path + ": the engine (--threads) needs the stream's domain before its first operation: "
+                            "give the stream a 'box x0 y0 z0 x1 y1 z1' line, or replay it from a regular file "
+                            "(read twice, the first time for its box), not a pipe");
   pdt::OpReader r(path);
   pdt::Box b{{HUGE_VAL, HUGE_VAL, HUGE_VAL}, {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL}};
   pdt::Operation op;

@@ -29,11 +29,14 @@ inline bool have_tool() {
 }
 
 // Runs `pdt <args>` with stdout and stderr captured in files of d.
-inline Result run_pdt(const TempDir& d, const std::string& args) {
+// piped_stdin: a file piped to the tool's standard input (through cat, so
+// that the tool sees a pipe, not a file); "" = /dev/null.
+inline Result run_pdt(const TempDir& d, const std::string& args, const std::string& piped_stdin = "") {
   Result r;
 #ifdef PDT_TOOL_PATH
   const std::string out = d.file("stdout.txt"), err = d.file("stderr.txt");
-  const std::string cmd = std::string("'") + PDT_TOOL_PATH + "' " + args + " >'" + out + "' 2>'" + err + "' </dev/null";
+  const std::string tool = std::string("'") + PDT_TOOL_PATH + "' " + args + " >'" + out + "' 2>'" + err + "'";
+  const std::string cmd = piped_stdin.empty() ? tool + " </dev/null" : "cat '" + piped_stdin + "' | " + tool;
   const int status = std::system(cmd.c_str());
   r.code = (status != -1 && WIFEXITED(status)) ? WEXITSTATUS(status) : -1;
   r.out = pdt_test::read_file(out);
@@ -41,6 +44,7 @@ inline Result run_pdt(const TempDir& d, const std::string& args) {
 #else
   (void)d;
   (void)args;
+  (void)piped_stdin;
 #endif
   return r;
 }

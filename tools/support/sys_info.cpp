@@ -38,7 +38,7 @@ ProgressBar::ProgressBar(std::string label, std::uint64_t total)
     : label_(std::move(label)), total_(total), enabled_(::isatty(STDERR_FILENO) == 1) {
   // Look at the clock every `step_` updates (about 1/1000 of the work), and
   // never when disabled.
-  step_ = total_ / 1000 + 1;
+  step_ = total_ ? total_ / 1000 + 1 : 1024;  // total unknown (0): every 1024 updates
   next_check_ = enabled_ ? step_ : ~std::uint64_t{0};
 }
 
@@ -49,8 +49,16 @@ void ProgressBar::slow_update(std::uint64_t done) {
   const double t = clock_.seconds();
   if (t < 0.5 || t - last_draw_ < 0.1) return;  // short runs: no display at all
   last_draw_ = t;
-  const double frac = total_ ? static_cast<double>(done) / static_cast<double>(total_) : 1.0;
   char buf[256];
+  if (total_ == 0) {  // a count without an end (a text stream announces none)
+    std::snprintf(buf, sizeof buf, "\r%s: %s done, %s elapsed   ", label_.c_str(), format_count(done).c_str(),
+                  format_seconds(t).c_str());
+    std::fputs(buf, stderr);
+    std::fflush(stderr);
+    drawn_ = true;
+    return;
+  }
+  const double frac = static_cast<double>(done) / static_cast<double>(total_);
   if (frac > 0.001) {
     const double eta = t * (1 - frac) / frac;
     std::snprintf(buf, sizeof buf, "\r%s: %5.1f%% (%s / %s), %s elapsed, ~%s left   ", label_.c_str(), 100 * frac,

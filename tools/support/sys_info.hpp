@@ -45,6 +45,8 @@ class Stopwatch {
 // (so logs and pipes never get control characters), redrawn at most ~10 times
 // a second, and only for runs that last over half a second. update() is
 // cheap enough for a per-operation loop: between redraws it is one compare.
+// total 0: unknown (a text stream announces no count): the count and the
+// time so far, no percentage.
 class ProgressBar {
  public:
   ProgressBar(std::string label, std::uint64_t total);

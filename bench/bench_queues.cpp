@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Which queue should carry operations from the master to a worker?
-// Compares oneTBB's concurrent_queue (what lib/engine.cpp uses) with
+// Compares oneTBB's concurrent_queue (what lib/engine.cpp used then; it has its
+// own intrusive queue now, lib/block_queue.hpp) with
 // Boost.Lockfree's queue on the engine's traffic pattern: one or more
 // producers push operation records, one consumer pops them, and the consumer
 // also re-pushes a share of them (rollbacks go to the back of its own queue).

@@ -24,8 +24,8 @@
 #   VCPKG_ROOT         an existing vcpkg root with the vcpkg executable built in it
 #   PDT_VCPKG_VENDOR   the offline vcpkg tarball (default ../shared/vendor/vcpkg-offline.tar.xz)
 #   PDT_PORT_VARIANTS  space-separated NAME=TRIPLET:SPEC list; default (x64 or arm64 host):
-#                      release=x64-linux-release:pdt          static, default features (mimalloc)
-#                      pool=x64-linux-release:pdt[core]       static, pdt's pool allocator
+#                      release=x64-linux-release:pdt          static, default features (pdt's pool allocator)
+#                      mimalloc=x64-linux-release:pdt[mimalloc]  static, the mimalloc feature
 #                      shared=x64-linux-dynamic:pdt           shared library, Release and Debug
 #   JOBS               parallel jobs (default 2); everything runs under nice -n 10
 # Needs: git cmake ninja c++ python3 pkg-config patchelf (vcpkg fixes ELF RPATHs and cannot
@@ -200,7 +200,7 @@ case "$(uname -m)" in
   aarch64|arm64) ARCH=arm64;;
   *) abort "no vcpkg Linux triplet for $(uname -m)";;
 esac
-VARIANTS=${PDT_PORT_VARIANTS:-"release=$ARCH-linux-release:pdt pool=$ARCH-linux-release:pdt[core] shared=$ARCH-linux-dynamic:pdt"}
+VARIANTS=${PDT_PORT_VARIANTS:-"release=$ARCH-linux-release:pdt mimalloc=$ARCH-linux-release:pdt[mimalloc] shared=$ARCH-linux-dynamic:pdt"}
 
 mkdir -p "$WORK" && WORK=$(cd "$WORK" && pwd)
 # A snapshot of the working tree: what git would put in a release (tracked and untracked,
@@ -261,7 +261,7 @@ for v in $VARIANTS; do
     "$VCPKG_ROOT/triplets/community/$triplet.cmake" || build_types="Release Debug"
   if grep -qs 'VCPKG_LIBRARY_LINKAGE[[:space:]]*dynamic' "$VCPKG_ROOT/triplets/$triplet.cmake" \
        "$VCPKG_ROOT/triplets/community/$triplet.cmake"; then linkage=shared; else linkage=static; fi
-  case "$spec" in *"[core]"*) alloc=pool;; *) alloc=mimalloc;; esac
+  case "$spec" in *mimalloc*) alloc=mimalloc;; *) alloc=pool;; esac
   missing=()
   for f in include/pdt/pdt.hpp share/pdt/pdtConfig.cmake share/pdt/pdtTargets.cmake share/pdt/copyright \
            share/pdt/usage lib/pkgconfig/pdt.pc; do

@@ -88,6 +88,23 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
       CHECK(r.err.find("usage: pdt") != std::string::npos);
     }
   }
+  SECTION("an output directory that is not there is refused before the run") {
+    const std::string ops = d.file("s.ops"), nowhere = d.file("missing/dir/m.vtu");
+    pdt::OpStream s;
+    s.ops.push_back({pdt::Operation::Kind::insert, {0, 0, 0}, 0});
+    pdt::write_ops(ops, s);
+    for (const std::string& args : {"run '" + ops + "' --out '" + nowhere + "'",
+                                    "refine --domain sphere --size 0.5 --out '" + nowhere + "'"}) {
+      INFO(args);
+      const Result r = run_pdt(d, args);
+      CHECK(r.code == 2);
+      CHECK(r.err.find("--out " + nowhere + ": cannot write in") != std::string::npos);
+      CHECK(r.out.empty());  // nothing ran
+    }
+    const Result r = run_pdt(d, "refine --domain sphere --size 0.5 --trace ''");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("--trace needs a file name") != std::string::npos);
+  }
   SECTION("a stream without a box, piped to the engine") {
     // The engine needs the domain first; without a box line the stream is
     // read twice, which a pipe cannot be: refused, saying what to do. With

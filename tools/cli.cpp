@@ -1,9 +1,14 @@
 // SPDX-License-Identifier: MIT
 #include "cli.hpp"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 
+#include "pdt/error.hpp"
 #include "support/cli_text.hpp"
 #include "support/sys_info.hpp"
 
@@ -12,6 +17,19 @@ namespace pdt_cli {
 void usage_error(const char* usage, std::string msg) { throw UsageError{std::move(msg), usage}; }
 
 bool is_help(const std::string& a) { return a == "--help" || a == "-h"; }
+
+void require_writable_dir(const char* option, const std::string& path) {
+  const std::size_t slash = path.find_last_of('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  struct stat st;
+  int err = 0;
+  if (::stat(dir.c_str(), &st) != 0) err = errno;
+  else if (!S_ISDIR(st.st_mode)) err = ENOTDIR;
+  else if (::access(dir.c_str(), W_OK) != 0) err = errno;
+  if (err)
+    throw pdt::Error(pdt::ErrorCode::io_failure, std::string(option) + " " + path + ": cannot write in '" + dir +
+                                                     "': " + std::strerror(err));
+}
 
 bool Args::option(const char* name, bool takes_value) {
   const std::string& a = a_[i_];

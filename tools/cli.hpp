@@ -43,6 +43,11 @@ class Args {
 std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v);
 double parse_real_option(const Args& args, const char* name, const std::string& v);
 
+// Refuses, before a long run, an output path whose directory is missing or
+// not writable (pdt::Error io_failure naming the option and the path); the
+// write itself may still fail later (a full disk), and says so then.
+void require_writable_dir(const char* option, const std::string& path);
+
 std::string box_string(const pdt::Box& b);
 // One "key   value" line of a command's summary.
 void row(const char* key, const std::string& value);

@@ -124,6 +124,8 @@ int cmd_refine(Args args) {
                                   ": expected at least 2 (below Shewchuk's bound Delaunay refinement need not terminate)");
   if (out && !ends_with_nocase(*out, ".vtu") && !ends_with_nocase(*out, ".node") && !ends_with_nocase(*out, ".ele"))
     usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
+  if (out) require_writable_dir("--out", *out);  // before the run, so a typo cannot waste it
+  if (trace && trace->empty()) usage_error(refine_usage, "--trace needs a file name");
   pdt_refine::RefineOptions o;
   try {
     o.domain = pdt_refine::domain_by_name(*domain_name);

@@ -405,6 +405,7 @@ int cmd_run(Args args) {
     if (ends_with_nocase(*out, ".node") || ends_with_nocase(*out, ".ele")) out_kind = OutKind::tetgen;
     else if (ends_with_nocase(*out, ".vtu")) out_kind = OutKind::vtu;
     else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
+    require_writable_dir("--out", *out);
   }
   if (!in_flight) in_flight = 4096 * std::max(1u, workers);
 

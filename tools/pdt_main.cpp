@@ -8,6 +8,7 @@
 // 2 usage error or any failure (bad input, I/O). Every failure is one
 // "pdt: ..." line on stderr; nothing escapes as an uncaught exception.
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -66,6 +67,9 @@ int dispatch(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A closed pipe on stdout (pdt run ... | head) is then a write error that
+  // ends the run with one "pdt: ..." line and status 2, not a silent SIGPIPE.
+  std::signal(SIGPIPE, SIG_IGN);
   try {
     const int status = dispatch(argc, argv);
     // A summary lost to a full disk or a closed pipe is a failure too.

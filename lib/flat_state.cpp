@@ -121,8 +121,9 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
     grid = detail::JumpGrid{};  // it names no vertex of the new cells yet
     // Insert the rest in a batch's order (spatial_order.hpp), each walk
     // starting from the previous vertex: short walks without the jump grid,
-    // which must not name a vertex before it is in the triangulation. Usually there is no rest (the 4th
-    // point raised the dimension): nothing to sort, nothing to allocate.
+    // which must not name a vertex before it is in the triangulation.
+    // Usually there is no rest (the 4th point raised the dimension): nothing
+    // to sort, nothing to allocate.
     if (!rest.empty()) {
       std::vector<Point3> points;
       points.reserve(rest.size());

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <string_view>
 
 namespace pdt::detail {
 
@@ -294,20 +295,24 @@ void FdWriter::flush() {
 // ---- OutputFile -------------------------------------------------------------
 
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
+  // /dev/stdout, /dev/fd/N and /proc/self/fd/N name a descriptor another
+  // process opened: a rename would swap the file from under it, so they are
+  // written in place.
+  direct_ = path.rfind("/proc/", 0) == 0 || path.rfind("/dev/fd/", 0) == 0;
   struct stat st;
-  if (::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+  if (!direct_ && ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+    char link[64];
+    const ssize_t n = ::readlink(path.c_str(), link, sizeof link);
     char* resolved = ::realpath(path.c_str(), nullptr);
-    if (resolved) {
+    if (n > 0 && std::string_view(link, static_cast<std::size_t>(n)).substr(0, 6) == "/proc/") {
+      direct_ = true;  // /dev/stdout -> /proc/self/fd/1
+    } else if (resolved) {
       target_ = resolved;
-      std::free(resolved);
     } else {
       direct_ = true;  // dangling (or looping) link: open follows it, or says why not
     }
+    std::free(resolved);
   }
-  // /dev/stdout and the like name a descriptor another process opened: a
-  // rename would swap the file from under it, so they are written in place.
-  for (const char* special : {"/dev/", "/proc/"})
-    if (path.rfind(special, 0) == 0 || target_.rfind(special, 0) == 0) direct_ = true;
   if (!direct_ && ::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) direct_ = true;
   if (direct_) {
     fd_ = ::open(target_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);

@@ -113,9 +113,10 @@ class FdWriter {
 // step fails, or the object is destroyed without commit(), the temporary file
 // is removed. Errors are io_failure naming the target path.
 // The target is what the path names: through a symbolic link, the file it
-// points to (the link stays); a device, FIFO or socket (/dev/null, a pipe) is
-// written in place, since no rename could stand in for it, and so is the
-// file behind a dangling link. Those direct writes cannot be undone.
+// points to (the link stays); a device, FIFO or socket (/dev/null, a pipe), or
+// a descriptor by name (/dev/stdout, /dev/fd/N, /proc/...), is written in
+// place, since no rename could stand in for it, and so is the file behind a
+// dangling link. Those direct writes cannot be undone.
 class OutputFile {
  public:
   explicit OutputFile(const std::string& path);

@@ -5,16 +5,18 @@
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include <sys/stat.h>
 #include <unistd.h>
+
 #include <algorithm>
-#include <cstring>
-#include <cerrno>
 #include <array>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <coroutine>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #include <random>
@@ -71,11 +73,15 @@ class Trace {
  public:
   // Written to a temporary file beside `path`, renamed onto it by close():
   // a run that fails (a full disk, an error) leaves no partial trace and
-  // keeps an older file of that name as it was.
-  explicit Trace(const std::string& path, const pdt::Box& box)
-      : path_(path), temp_(path.empty() ? std::string() : path + ".tmp." + std::to_string(::getpid())) {
+  // keeps an older file of that name as it was. A path that exists and is
+  // not a regular file (a symbolic link, a device, a FIFO) is written in
+  // place, as pdt's own writers do (a rename would replace it).
+  explicit Trace(const std::string& path, const pdt::Box& box) : path_(path) {
     if (path.empty()) return;
-    f_ = std::fopen(temp_.c_str(), "w");
+    struct stat st;
+    const bool in_place = ::lstat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode);
+    if (!in_place) temp_ = path + ".tmp." + std::to_string(::getpid());
+    f_ = std::fopen(in_place ? path.c_str() : temp_.c_str(), "w");
     if (!f_)
       throw pdt::Error(pdt::ErrorCode::io_failure,
                        "cannot write the trace '" + path + "': " + std::strerror(errno));
@@ -86,7 +92,7 @@ class Trace {
   ~Trace() {
     if (f_) {  // not closed: the run failed
       std::fclose(f_);
-      std::remove(temp_.c_str());
+      if (!temp_.empty()) std::remove(temp_.c_str());
     }
   }
   void inserted(std::uint64_t incarnation, const Point3& p) {
@@ -121,14 +127,14 @@ class Trace {
     const bool bad = std::ferror(f_) != 0;
     const bool closed = std::fclose(f_) == 0;
     f_ = nullptr;
-    if (!closed || bad || std::rename(temp_.c_str(), path_.c_str()) != 0) {
-      std::remove(temp_.c_str());
+    if (!closed || bad || (!temp_.empty() && std::rename(temp_.c_str(), path_.c_str()) != 0)) {
+      if (!temp_.empty()) std::remove(temp_.c_str());
       throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path_ + "' (disk full?)");
     }
   }
 
  private:
-  std::string path_, temp_;
+  std::string path_, temp_;  // temp_ empty: writing path_ in place
   std::FILE* f_ = nullptr;
   std::mutex m_;
   std::uint64_t next_ = 0;

@@ -50,16 +50,11 @@ void ProgressBar::slow_update(std::uint64_t done) {
   if (t < 0.5 || t - last_draw_ < 0.1) return;  // short runs: no display at all
   last_draw_ = t;
   char buf[256];
+  const double frac = total_ ? static_cast<double>(done) / static_cast<double>(total_) : 0.0;
   if (total_ == 0) {  // a count without an end (a text stream announces none)
     std::snprintf(buf, sizeof buf, "\r%s: %s done, %s elapsed   ", label_.c_str(), format_count(done).c_str(),
                   format_seconds(t).c_str());
-    std::fputs(buf, stderr);
-    std::fflush(stderr);
-    drawn_ = true;
-    return;
-  }
-  const double frac = static_cast<double>(done) / static_cast<double>(total_);
-  if (frac > 0.001) {
+  } else if (frac > 0.001) {
     const double eta = t * (1 - frac) / frac;
     std::snprintf(buf, sizeof buf, "\r%s: %5.1f%% (%s / %s), %s elapsed, ~%s left   ", label_.c_str(), 100 * frac,
                   format_count(done).c_str(), format_count(total_).c_str(), format_seconds(t).c_str(),

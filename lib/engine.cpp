@@ -49,6 +49,8 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
       nworkers(nw),
       partition(d, b, nw),
       blocks(std::make_unique<Block[]>(partition.blocks())),
+      nonempty(partition.blocks()),
+      submitted(std::make_unique<SubmitCount[]>(submit_shards)),
       world(nw) {
   // Everything that may fail comes first; the triangulation is touched last.
   for (std::uint32_t i = 0; i < partition.blocks(); ++i) blocks[i].home = partition.home_of(i);
@@ -155,7 +157,7 @@ void EngineState::submit(OpRecord* op, std::uint32_t count) {
       op->routed ? partition.block_of(op->point)
                  : static_cast<std::uint32_t>((op->vertex != no_vertex ? op->vertex : op->ticket) % partition.blocks());
   Block& block = blocks[b];
-  block.submitted.fetch_add(count, std::memory_order_relaxed);
+  submitted[b % submit_shards].n.fetch_add(count, std::memory_order_relaxed);
   enqueue(block, op);
 }
 

@@ -133,10 +133,8 @@ WorkerCoroutine EngineState::body(Worker& w) {
         if (!op) break;  // no record to be had now: the run waits in its block
       }
       const Outcome outcome = execute(w, op);
-      if (outcome == Outcome::rollback || outcome == Outcome::global) {
-        b->queued.fetch_add(1, std::memory_order_relaxed);
-        b->queue.push(op);  // back of its block's queue: the others go first
-      }
+      if (outcome == Outcome::rollback || outcome == Outcome::global)
+        count_in(*b, op);  // back of its block's queue: the others go first
       if (outcome == Outcome::global) break;  // the world is stopped: wait for it
       maybe_grow_grid(w);
       using Verdict = ContentionManager::Verdict;
@@ -146,10 +144,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         case Verdict::carry_on: break;
       }
     }
-    if (run) {  // what is left of it, back in its block
-      b->queued.fetch_add(1, std::memory_order_relaxed);
-      b->queue.push(run);
-    }
+    if (run) count_in(*b, run);  // what is left of it, back in its block
     release(*b);
     // Work left behind while workers idle: let one take it (or another block
     // this worker then claims first). Without this, a worker that went idle
@@ -201,7 +196,10 @@ bool EngineState::may_serve(const Worker& w, const Block& b) const {
 Block* EngineState::claim(Worker& w) {
   auto try_claim = [&](std::uint32_t i) -> Block* {
     Block& b = blocks[i];
-    if (!may_serve(w, b)) return nullptr;
+    if (!may_serve(w, b)) {
+      if (b.queued.load(std::memory_order_relaxed) == 0) nonempty.clear_if_empty(i, b.queued);
+      return nullptr;
+    }
     int expect = -1;
     if (!b.holder.compare_exchange_strong(expect, static_cast<int>(w.index), std::memory_order_acq_rel)) return nullptr;
     if (b.queued.load(std::memory_order_acquire) == 0) {  // emptied meanwhile
@@ -212,23 +210,26 @@ Block* EngineState::claim(Worker& w) {
   };
   const std::uint32_t first = partition.home_first(w.index), end = partition.home_first(w.index + 1);
   const std::uint32_t count = partition.blocks();
-  // Elsewhere, nearest first along the curve. Blocks whose home is not
+  // Elsewhere, nearest first along the curve (ties: the lower side first),
+  // visiting only the blocks marked non-empty. Blocks whose home is not
   // running (asleep, idle, waiting) before busy homes' blocks.
   auto steal = [&](bool orphans_only) -> Block* {
-    for (std::uint32_t d = 1; d <= count; ++d) {
-      const std::int64_t near[2] = {std::int64_t{first} - d, std::int64_t{end} - 1 + d};
-      bool any = false;
-      for (std::int64_t i : near) {
-        if (i < 0 || i >= std::int64_t{count}) continue;
-        any = true;
-        const Block& b = blocks[static_cast<std::size_t>(i)];
-        if (orphans_only && workers[b.home]->phase.load(std::memory_order_relaxed) == WorkerPhase::running) continue;
-        if (Block* got = try_claim(static_cast<std::uint32_t>(i))) {
-          w.steals.fetch_add(1, std::memory_order_relaxed);
-          return got;
-        }
+    std::int64_t below = nonempty.prev(std::int64_t{first} - 1);
+    std::uint32_t above = nonempty.next(end, count);
+    while (below >= 0 || above < count) {
+      const bool take_below = below >= 0 && (above >= count || std::int64_t{first} - below <=
+                                                                   std::int64_t{above} - (std::int64_t{end} - 1));
+      const std::uint32_t i = take_below ? static_cast<std::uint32_t>(below) : above;
+      if (take_below)
+        below = nonempty.prev(below - 1);
+      else
+        above = nonempty.next(above + 1, count);
+      if (orphans_only && workers[blocks[i].home]->phase.load(std::memory_order_relaxed) == WorkerPhase::running)
+        continue;
+      if (Block* got = try_claim(i)) {
+        w.steals.fetch_add(1, std::memory_order_relaxed);
+        return got;
       }
-      if (!any) break;
     }
     return nullptr;
   };
@@ -255,7 +256,8 @@ Block* EngineState::claim(Worker& w) {
 }
 
 bool EngineState::work_for(const Worker& w) const {
-  for (std::uint32_t i = 0; i < partition.blocks(); ++i)
+  const std::uint32_t count = partition.blocks();
+  for (std::uint32_t i = nonempty.next(0, count); i < count; i = nonempty.next(i + 1, count))
     if (may_serve(w, blocks[i])) return true;
   return false;
 }
@@ -302,6 +304,16 @@ bool EngineState::maybe_recut(Worker& w) {
   }
   bool recut = false;
   if (claimed == count) {
+#ifndef NDEBUG
+    // NonEmptyBlocks' invariant: every block holding work is marked (a
+    // submitter between its count and its mark finishes at once).
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+      while (blocks[i].queued.load() != 0 && !nonempty.marked(i) && std::chrono::steady_clock::now() < until)
+        std::this_thread::yield();
+      assert(blocks[i].queued.load() == 0 || nonempty.marked(i));
+    }
+#endif
     // Every queued record out, chained in order through its (now free) queue
     // link, and how many operations they stand for (a run: its points left).
     OpRecord* first = nullptr;
@@ -347,8 +359,7 @@ bool EngineState::maybe_recut(Worker& w) {
       const std::uint32_t dest = op->routed ? partition.block_of(op->point)
                                             : static_cast<std::uint32_t>(
                                                   (op->vertex != no_vertex ? op->vertex : op->ticket) % count);
-      blocks[dest].queued.fetch_add(1, std::memory_order_relaxed);
-      blocks[dest].queue.push(op);
+      count_in(blocks[dest], op);
     }
     recut_after.store(completed_total() + weight / 2, std::memory_order_relaxed);
     if (recut) recuts.fetch_add(1, std::memory_order_relaxed);
@@ -371,9 +382,14 @@ void EngineState::resume(Worker& w) {
   spawn(w.handle);
 }
 
-void EngineState::enqueue(Block& b, OpRecord* op) {
+void EngineState::count_in(Block& b, OpRecord* op) {
   b.queued.fetch_add(1, std::memory_order_seq_cst);
+  nonempty.mark(index_of(b));
   b.queue.push(op);
+}
+
+void EngineState::enqueue(Block& b, OpRecord* op) {
+  count_in(b, op);
   Worker& home = *workers[b.home];
   WorkerPhase expect = WorkerPhase::idle;
   if (home.phase.compare_exchange_strong(expect, WorkerPhase::running)) {
@@ -435,7 +451,7 @@ std::uint64_t EngineState::in_flight() const {
   // counts were read, everything submitted until then was done.
   std::uint64_t finished = 0, submitted = 0;
   for (const auto& w : workers) finished += w->finished.load(std::memory_order_acquire);
-  for (std::uint32_t i = 0; i < partition.blocks(); ++i) submitted += blocks[i].submitted.load(std::memory_order_acquire);
+  for (std::uint32_t i = 0; i < submit_shards; ++i) submitted += this->submitted[i].n.load(std::memory_order_acquire);
   assert(finished <= submitted);
   return submitted - finished;
 }

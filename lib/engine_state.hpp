@@ -45,7 +45,8 @@
 //     last one running, and a worker goes idle only after a scan, made after
 //     it announced itself idle, found nothing it may serve: so while work is
 //     pending some worker runs, or a submitter or drain() resumes one;
-//   - submitted (summed over blocks) >= finished (summed over workers);
+//   - a block with queued operations is marked in `nonempty` (NonEmptyBlocks);
+//   - submitted (summed over shards) >= finished (summed over workers);
 //     drain() returns when they are equal.
 #include <oneapi/tbb/task_group.h>
 
@@ -59,6 +60,7 @@
 
 #include "block_queue.hpp"
 #include "contention_manager.hpp"
+#include "nonempty_blocks.hpp"
 #include "op_record.hpp"
 #include "partition.hpp"
 #include "pdt/engine.hpp"
@@ -114,8 +116,7 @@ enum class WorkerPhase : int { idle, running, sleeping };
 struct alignas(64) Block {
   BlockQueue queue;
   std::atomic<int> holder{-1};            // the worker serving it, or -1
-  std::atomic<std::uint32_t> queued{0};   // pushed and not popped (counted before the push)
-  std::atomic<std::uint64_t> submitted{0};  // operations routed here, ever
+  std::atomic<std::uint32_t> queued{0};   // pushed and not popped (counted before the push; see count_in)
   unsigned home = 0;
 };
 
@@ -167,6 +168,15 @@ struct EngineState {
   unsigned nworkers;
   Partition partition;
   std::unique_ptr<Block[]> blocks;
+  NonEmptyBlocks nonempty;  // which blocks may hold work: what claim() and work_for() scan
+  // Operations submitted, ever, in shards (a block's shard: its index mod
+  // submit_shards), so that submitters on many threads do not share one
+  // line and in_flight() reads a few counters, not every block.
+  static constexpr std::uint32_t submit_shards = 64;
+  struct alignas(64) SubmitCount {
+    std::atomic<std::uint64_t> n{0};
+  };
+  std::unique_ptr<SubmitCount[]> submitted;
   std::vector<std::unique_ptr<Worker>> workers;
   std::vector<WorkerCoroutine> bodies;
   TicketTable tickets;
@@ -218,6 +228,10 @@ struct EngineState {
   // The engine whose task the current thread is running, if any.
   static thread_local const EngineState* running_engine;
   void enqueue(Block& b, OpRecord* op);  // push and make sure someone serves b (op already counted)
+  // Pushes op into b, counted first in b.queued and then marked in `nonempty`
+  // (the order NonEmptyBlocks relies on, seq_cst). Every push goes through here.
+  void count_in(Block& b, OpRecord* op);
+  std::uint32_t index_of(const Block& b) const { return static_cast<std::uint32_t>(&b - blocks.get()); }
   void resume(Worker& w);  // w was idle or asleep: mark it running and resume it as a task
   bool wake_one();         // a sleeper, if any
   bool wake_idle();        // an idle worker, if any (to take over busy blocks)

@@ -37,6 +37,7 @@
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
+#include "nonempty_blocks.hpp"     // the claim scan's bitmap, tested alone
 #include "partition.hpp"           // the recut test reads the blocks' cut
 #include "triangulation_impl.hpp"  // the contention test holds a vertex lock itself
 
@@ -1095,6 +1096,54 @@ TEST_CASE("engine: unusual block layouts still give the exact result", "[engine]
     if (!stealing) REQUIRE(run.stats.total().steals == 0);
     require_result(t, s);
   }
+}
+
+TEST_CASE("engine: NonEmptyBlocks finds the nearest marked block on either side", "[engine]") {
+  // Sizes around the word boundaries; a reference set checked against every query.
+  for (std::uint32_t count : {1u, 63u, 64u, 65u, 200u}) {
+    pdt::detail::NonEmptyBlocks marks(count);
+    std::vector<std::atomic<std::uint32_t>> queued(count);
+    std::vector<bool> ref(count, false);
+    std::mt19937 rng(count);
+    for (int round = 0; round < 200; ++round) {
+      const std::uint32_t i = rng() % count;
+      if (rng() % 3) {
+        queued[i].store(1);
+        marks.mark(i);
+        ref[i] = true;
+      } else {
+        queued[i].store(0);
+        marks.clear_if_empty(i, queued[i]);
+        ref[i] = false;
+      }
+      for (std::uint32_t from = 0; from <= count; ++from) {
+        std::uint32_t want_next = count;
+        for (std::uint32_t k = from; k < count; ++k)
+          if (ref[k]) { want_next = k; break; }
+        REQUIRE(marks.next(from, count) == want_next);
+        std::int64_t want_prev = -1;
+        for (std::int64_t k = std::int64_t{from} - 1; k >= 0; --k)
+          if (ref[static_cast<std::size_t>(k)]) { want_prev = k; break; }
+        REQUIRE(marks.prev(std::int64_t{from} - 1) == want_prev);
+      }
+    }
+    // A clear that finds work come in meanwhile keeps the mark.
+    queued[0].store(1);
+    marks.mark(0);
+    marks.clear_if_empty(0, queued[0]);
+    REQUIRE(marks.marked(0));
+  }
+}
+
+TEST_CASE("engine: the most workers the engine accepts, on this machine's few cores", "[engine][tsan]") {
+  // 4096 workers cut the domain into 64^3 blocks; idle workers find work
+  // through NonEmptyBlocks (scanning every block took 25 s for 2000 points).
+  const pdt::OpStream s = generated(pdt::Distribution::uniform, scaled(2000, 300), 0.3, pdt::RemovalOrder::interleaved, 4);
+  pdt::Triangulation t;
+  const EngineRun run = replay_engine(t, s, *s.box, options_with(4096));
+  REQUIRE(run.blocks == 64);
+  require_stats(run, s.ops.size(), 4096);
+  require_result(t, s);
 }
 
 // =============================================================================

@@ -80,7 +80,8 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     for (const char* args : {"gen --points ten --out x.ops", "gen --points 10 --dist gaussian --out x.ops",
                              "gen --points 10 --remove-fraction 2 --out x.ops", "gen --points 10", "gen --out x.ops",
                              "gen --points", "run", "run a.ops b.ops", "run a.ops --threads -1",
-                             "run a.ops --out mesh.stl", "check"}) {
+                             "run a.ops --out mesh.stl", "run a.ops --vtu-ascii", "run a.ops --out m.node --vtu-ascii",
+                             "run a.ops --in-order", "check"}) {
       INFO(args);
       const Result r = run_pdt(d, args);
       CHECK(r.code == 2);
@@ -156,6 +157,8 @@ TEST_CASE("pdt gen, run and check work end to end", "[cli]") {
   CHECK(r.out.find("removals         1,500") != std::string::npos);
   CHECK(r.out.find("validate         ok") != std::string::npos);
   CHECK(r.out.find("peak memory") != std::string::npos);
+  CHECK(r.out.find("wrote            " + d.file("mesh.node") + " and " + d.file("mesh.ele") + " (1,500 points") !=
+        std::string::npos);
   CHECK(r.err.empty());  // no progress bar when stderr is not a terminal
 
   r = run_pdt(d, "check '" + mesh + "'");

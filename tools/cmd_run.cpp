@@ -407,6 +407,10 @@ int cmd_run(Args args) {
     else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
     require_writable_dir("--out", *out);
   }
+  if (vtu_ascii && out_kind != OutKind::vtu)
+    usage_error(run_usage, "--vtu-ascii applies to a .vtu output; give --out FILE.vtu (or drop --vtu-ascii)");
+  if (in_order && !is_point_file(*input))
+    usage_error(run_usage, "--in-order applies to point files; an operation stream is always replayed in its order");
   if (!in_flight) in_flight = 4096 * std::max(1u, workers);
 
   pdt::Triangulation t;
@@ -474,7 +478,14 @@ int cmd_run(Args args) {
     const pdt::Mesh m = pdt::extract_mesh(t);
     if (out_kind == OutKind::tetgen) pdt::write_tetgen(*out, m);
     else pdt::write_vtu(*out, m, vtu_ascii ? pdt::VtuEncoding::ascii : pdt::VtuEncoding::zlib);
-    row("wrote", *out + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
+    // write_tetgen writes BASE.node and BASE.ele, whichever of the two (in
+    // any case) --out named: say which files those are.
+    std::string written = *out;
+    if (out_kind == OutKind::tetgen) {
+      const std::string base = out->substr(0, out->size() - (ends_with_nocase(*out, ".node") ? 5 : 4));
+      written = base + ".node and " + base + ".ele";
+    }
+    row("wrote", written + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
   }
   std::fflush(stdout);
   return status;

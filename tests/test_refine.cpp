@@ -107,6 +107,30 @@ TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds
     }
     CHECK(judged > m.tets.size() / 2);
     CHECK(bad == 0);
+    // The slivers it reports (inside: centroid inside; dihedral angle under
+    // 5 degrees), counted here with CGAL's dihedral angles. 1 of slack: a
+    // centroid or angle on the line may round either way.
+    {
+      std::size_t slivers = 0;
+      static constexpr int edge[6][4] = {{0, 1, 2, 3}, {0, 2, 1, 3}, {0, 3, 1, 2}, {1, 2, 0, 3}, {1, 3, 0, 2}, {2, 3, 0, 1}};
+      for (const auto& t : m.tets) {
+        const K::Point_3 p[4] = {to_cgal(m.points[t[0]]), to_cgal(m.points[t[1]]), to_cgal(m.points[t[2]]),
+                                 to_cgal(m.points[t[3]])};
+        const K::Point_3 g = CGAL::centroid(p[0], p[1], p[2], p[3]);
+        if (!(torus({g.x(), g.y(), g.z()}) < 0)) continue;
+        double smallest = 180;
+        for (const auto& e : edge)
+          smallest = std::min(smallest, std::abs(CGAL::approximate_dihedral_angle(p[e[0]], p[e[1]], p[e[2]], p[e[3]])));
+        if (smallest < 5) ++slivers;
+      }
+      const std::size_t at = r.out.find(" slivers under 5 degrees inside");
+      REQUIRE(at != std::string::npos);
+      const std::size_t start = r.out.rfind(' ', at - 1) + 1;
+      std::string printed = r.out.substr(start, at - start);
+      printed.erase(std::remove(printed.begin(), printed.end(), ','), printed.end());
+      const long reported = std::stol(printed);
+      CHECK(std::abs(reported - static_cast<long>(slivers)) <= 1);
+    }
     // The trace replays to the same triangulation, sequentially and on the engine.
     for (const char* replay : {"", " --threads 3"}) {
       INFO("replay" << replay);

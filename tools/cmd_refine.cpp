@@ -167,7 +167,11 @@ int cmd_refine(Args args) {
                 q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
                 format_count(q.protected_layer).c_str());
   row("worst inside", buf);
-  std::snprintf(buf, sizeof buf, "%.2f degrees (smallest dihedral angle inside)", q.min_dihedral);
+  std::snprintf(buf, sizeof buf,
+                "%.2f degrees smallest inside, %.2f among the judged; %s slivers under %.0f degrees inside (%s "
+                "judged): the radius-edge bound does not exclude slivers",
+                q.min_dihedral, q.min_dihedral_judged, format_count(q.slivers).c_str(),
+                pdt_refine::MeshQuality::sliver_degrees, format_count(q.slivers_judged).c_str());
   row("dihedral", buf);
   int status = 0;
   if (q.violations) {

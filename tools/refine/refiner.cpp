@@ -481,9 +481,11 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
     for (int i = 0; i < 4; ++i) p[i] = t.point(t.cell_vertex(c, i));
     const Point3 centroid{(p[0].x + p[1].x + p[2].x + p[3].x) / 4, (p[0].y + p[1].y + p[2].y + p[3].y) / 4,
                           (p[0].z + p[1].z + p[2].z + p[3].z) / 4};
+    const double dihedral = min_dihedral_degrees(p);
     if (d.f(centroid) < 0) {
       ++q.inside;
-      q.min_dihedral = std::min(q.min_dihedral, min_dihedral_degrees(p));
+      q.min_dihedral = std::min(q.min_dihedral, dihedral);
+      if (dihedral < MeshQuality::sliver_degrees) ++q.slivers;
     }
     const TetShape s = shape(p);
     if (!s.ok || !(d.f(s.circumcentre) < 0)) continue;
@@ -492,6 +494,8 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
       continue;
     }
     ++q.judged;
+    q.min_dihedral_judged = std::min(q.min_dihedral_judged, dihedral);
+    if (dihedral < MeshQuality::sliver_degrees) ++q.slivers_judged;
     q.worst_ratio = std::max(q.worst_ratio, s.radius_edge);
     q.largest_radius = std::max(q.largest_radius, s.circumradius);
     if (s.circumradius > size || s.radius_edge > ratio) ++q.violations;

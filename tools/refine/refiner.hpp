@@ -79,6 +79,12 @@ struct MeshQuality {
   double worst_ratio = 0;          // largest radius-edge ratio among the judged
   double largest_radius = 0;       // largest circumradius among the judged
   double min_dihedral = 180;       // smallest dihedral angle among the inside, degrees
+  double min_dihedral_judged = 180;  // the same among the judged
+  // Inside tetrahedra with a dihedral angle under sliver_degrees: the
+  // radius-edge bound does not exclude such slivers (flat tetrahedra whose
+  // four vertices lie near a circle of their circumsphere).
+  static constexpr double sliver_degrees = 5;
+  std::uint64_t slivers = 0, slivers_judged = 0;
 };
 // The samples are those refine() used (the same size and seed).
 MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed);

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cassert>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -363,6 +364,27 @@ void OutputFile::finish() {
     throw_io_error("cannot write", path_, err);
   }
   finished_ = true;
+}
+
+bool OutputFile::seekable() const { return fd_ >= 0 && ::lseek(fd_, 0, SEEK_CUR) != -1; }
+
+void OutputFile::overwrite(std::uint64_t at, const void* data, std::size_t n) {
+  assert(!finished_);
+  try {
+    writer_->flush();
+    const char* p = static_cast<const char*>(data);
+    while (n > 0) {
+      const ssize_t w = ::pwrite(fd_, p, n, static_cast<off_t>(at));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) throw_io_error("cannot write", path_, w < 0 ? errno : EIO);
+      p += w;
+      at += static_cast<std::uint64_t>(w);
+      n -= static_cast<std::size_t>(w);
+    }
+  } catch (...) {
+    discard();
+    throw;
+  }
 }
 
 void OutputFile::commit() {

@@ -130,6 +130,12 @@ class OutputFile {
   void finish();
   // finish(), then renames onto the target. After this the object is inert.
   void commit();
+  // Whether overwrite() can go back in the file (a temporary or regular
+  // file; not a FIFO, socket or terminal). Before finish().
+  bool seekable() const;
+  // Flushes, then writes n bytes at byte offset `at` of what was written
+  // (a count patched into a header). Before finish(); io_failure on error.
+  void overwrite(std::uint64_t at, const void* data, std::size_t n);
   const std::string& path() const { return path_; }
 
  private:

@@ -292,34 +292,73 @@ OpStream read_ops(const std::string& path) {
   return st;
 }
 
+namespace {
+
+// The binary header: magic, box flag, box, count (at kCountOffset).
+constexpr std::size_t kHeadSize = 8 + 1 + 48 + 8, kCountOffset = 57;
+void put_binary_head(detail::OutputFile& out, const std::optional<Box>& box, std::uint64_t count) {
+  unsigned char head[kHeadSize] = {};
+  std::memcpy(head, kMagic, 8);
+  head[8] = box ? 1 : 0;
+  if (box) {
+    const double v[6] = {box->lo.x, box->lo.y, box->lo.z, box->hi.x, box->hi.y, box->hi.z};
+    for (int i = 0; i < 6; ++i) store_f64(head + 9 + 8 * i, v[i]);
+  }
+  store_u64(head + kCountOffset, count);
+  out.out().put(head, sizeof head);
+}
+
+void put_binary_op(detail::OutputFile& out, const Operation& op) {
+  unsigned char rec[25];
+  if (op.kind == Operation::Kind::insert) {
+    rec[0] = 0;
+    store_f64(rec + 1, op.point.x);
+    store_f64(rec + 9, op.point.y);
+    store_f64(rec + 17, op.point.z);
+    out.out().put(rec, 25);
+  } else {
+    rec[0] = 1;
+    store_u64(rec + 1, op.target);
+    out.out().put(rec, 9);
+  }
+}
+
+// `line` is scratch (its capacity reused).
+void put_text_box(detail::OutputFile& out, const Box& b, std::string& line) {
+  line = "box";
+  for (double d : {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z}) {
+    line += ' ';
+    detail::append_double(line, d);
+  }
+  line += '\n';
+  out.put(line);
+}
+
+void put_text_op(detail::OutputFile& out, const Operation& op, std::string& line) {
+  line.clear();
+  if (op.kind == Operation::Kind::insert) {
+    line += "i ";
+    detail::append_double(line, op.point.x);
+    line += ' ';
+    detail::append_double(line, op.point.y);
+    line += ' ';
+    detail::append_double(line, op.point.z);
+  } else {
+    line += "r ";
+    detail::append_uint(line, op.target);
+  }
+  line += '\n';
+  out.put(line);
+}
+
+}  // namespace
+
 void write_ops(const std::string& path, const OpStream& stream) {
   validate_for_write(stream);
   detail::OutputFile out(path);
   if (detail::ends_with_nocase(path, ".opsb")) {
-    unsigned char head[8 + 1 + 48 + 8] = {};
-    std::memcpy(head, kMagic, 8);
-    head[8] = stream.box ? 1 : 0;
-    if (stream.box) {
-      const Box& b = *stream.box;
-      const double v[6] = {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z};
-      for (int i = 0; i < 6; ++i) store_f64(head + 9 + 8 * i, v[i]);
-    }
-    store_u64(head + 57, stream.ops.size());
-    out.out().put(head, sizeof head);
-    unsigned char rec[25];
-    for (const Operation& op : stream.ops) {
-      if (op.kind == Operation::Kind::insert) {
-        rec[0] = 0;
-        store_f64(rec + 1, op.point.x);
-        store_f64(rec + 9, op.point.y);
-        store_f64(rec + 17, op.point.z);
-        out.out().put(rec, 25);
-      } else {
-        rec[0] = 1;
-        store_u64(rec + 1, op.target);
-        out.out().put(rec, 9);
-      }
-    }
+    put_binary_head(out, stream.box, stream.ops.size());
+    for (const Operation& op : stream.ops) put_binary_op(out, op);
   } else {
     std::string line;
     line.reserve(128);
@@ -329,34 +368,134 @@ void write_ops(const std::string& path, const OpStream& stream) {
     detail::append_uint(line, stream.remove_count());
     line += " removals\n";
     out.put(line);
-    if (stream.box) {
-      const Box& b = *stream.box;
-      line = "box";
-      for (double d : {b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z}) {
-        line += ' ';
-        detail::append_double(line, d);
-      }
-      line += '\n';
-      out.put(line);
-    }
-    for (const Operation& op : stream.ops) {
-      line.clear();
-      if (op.kind == Operation::Kind::insert) {
-        line += "i ";
-        detail::append_double(line, op.point.x);
-        line += ' ';
-        detail::append_double(line, op.point.y);
-        line += ' ';
-        detail::append_double(line, op.point.z);
-      } else {
-        line += "r ";
-        detail::append_uint(line, op.target);
-      }
-      line += '\n';
-      out.put(line);
-    }
+    if (stream.box) put_text_box(out, *stream.box, line);
+    for (const Operation& op : stream.ops) put_text_op(out, op, line);
   }
   out.commit();
+}
+
+// ---- OpWriter ---------------------------------------------------------------
+// Invariant: `live` holds exactly the insertions written and not undone, so
+// every operation written passes read_ops's checks; `out` is null once closed
+// (or failed), and then only destruction is allowed.
+struct OpWriter::State {
+  std::string path;
+  std::optional<Box> box;
+  bool binary = false;
+  std::unique_ptr<detail::OutputFile> out;
+  LiveSet live;
+  std::uint64_t written = 0;
+  std::string line;
+
+  detail::OutputFile& open(const char* call) {
+    if (!out)
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("OpWriter::") + call + ": '" + path + "' is closed (or a write to it failed)");
+    return *out;
+  }
+  // A write error discards the file (OutputFile did): the writer is closed.
+  template <class F>
+  void guarded(F&& f) {
+    try {
+      f();
+    } catch (...) {
+      out.reset();
+      throw;
+    }
+  }
+};
+
+OpWriter::OpWriter(const std::string& path, const std::optional<Box>& box) : state_(std::make_unique<State>()) {
+  State& st = *state_;
+  st.path = path;
+  st.box = box;
+  st.binary = detail::ends_with_nocase(path, ".opsb");
+  if (box)
+    if (const char* why = box_problem(*box))
+      throw Error(ErrorCode::invalid_argument, "OpWriter: the box " + std::string(why));
+  st.out = std::make_unique<detail::OutputFile>(path);
+  if (st.binary && !st.out->seekable())
+    throw Error(ErrorCode::invalid_argument,
+                "OpWriter: '" + path + "' cannot be sought in, and the binary form (.opsb) patches its count into "
+                "its header when closed; write the text form (.ops) to a pipe or device");
+  st.line.reserve(128);
+  st.guarded([&] {
+    if (st.binary) {
+      put_binary_head(*st.out, box, 0);
+    } else {
+      st.out->put("# pdt operation stream, written one operation at a time\n");
+      if (box) put_text_box(*st.out, *box, st.line);
+    }
+  });
+}
+
+OpWriter::~OpWriter() = default;
+OpWriter::OpWriter(OpWriter&&) noexcept = default;
+OpWriter& OpWriter::operator=(OpWriter&&) noexcept = default;
+
+void OpWriter::write(const Operation& op) {
+  State& st = *state_;
+  detail::OutputFile& out = st.open("write");
+  if (op.kind == Operation::Kind::insert) {
+    if (!is_finite(op.point))
+      throw Error(ErrorCode::invalid_argument, "OpWriter: insertion of a point with a NaN or infinite coordinate");
+    if (st.box && !st.box->contains(op.point))
+      throw Error(ErrorCode::invalid_argument,
+                  "OpWriter: insertion of " + detail::format_point(op.point) + ", outside the box");
+  } else if (op.kind == Operation::Kind::remove) {
+    if (op.target >= st.live.made)
+      throw Error(ErrorCode::invalid_argument, "OpWriter: remove " + std::to_string(op.target) +
+                                                   " names an insertion that has not been written yet");
+    if (!st.live.live.count(op.target))
+      throw Error(ErrorCode::invalid_argument,
+                  "OpWriter: remove " + std::to_string(op.target) + " names an insertion that was already undone");
+  } else {
+    throw Error(ErrorCode::invalid_argument, "OpWriter: an operation of unknown kind");
+  }
+  st.guarded([&] {
+    if (st.binary)
+      put_binary_op(out, op);
+    else
+      put_text_op(out, op, st.line);
+  });
+  if (op.kind == Operation::Kind::insert)
+    st.live.insert();
+  else
+    st.live.remove(op.target);
+  ++st.written;
+}
+
+std::uint64_t OpWriter::insert(const Point3& p) {
+  Operation op;
+  op.kind = Operation::Kind::insert;
+  op.point = p;
+  write(op);
+  return state_->live.made - 1;
+}
+
+void OpWriter::remove(std::uint64_t k) {
+  Operation op;
+  op.kind = Operation::Kind::remove;
+  op.target = k;
+  write(op);
+}
+
+std::uint64_t OpWriter::operations_written() const { return state_->written; }
+std::uint64_t OpWriter::insertions_written() const { return state_->live.made; }
+const std::string& OpWriter::path() const { return state_->path; }
+
+void OpWriter::close() {
+  State& st = *state_;
+  detail::OutputFile& out = st.open("close");
+  st.guarded([&] {
+    if (st.binary) {
+      unsigned char count[8];
+      store_u64(count, st.written);
+      out.overwrite(kCountOffset, count, sizeof count);
+    }
+    out.commit();
+  });
+  st.out.reset();
 }
 
 }  // namespace pdt

@@ -81,7 +81,8 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
                              "gen --points 10 --remove-fraction 2 --out x.ops", "gen --points 10", "gen --out x.ops",
                              "gen --points", "run", "run a.ops b.ops", "run a.ops --threads -1",
                              "run a.ops --out mesh.stl", "run a.ops --vtu-ascii", "run a.ops --out m.node --vtu-ascii",
-                             "run a.ops --in-order", "check"}) {
+                             "run a.ops --in-order", "gen --points 10 --out x.ops.gz", "run a.ply.gz",
+                             "refine --domain sphere --size 0.5 --trace t.opsb.gz", "check"}) {
       INFO(args);
       const Result r = run_pdt(d, args);
       CHECK(r.code == 2);

@@ -4,6 +4,7 @@
 // (disk full via /dev/full and a file size limit) leaving nothing behind.
 #include <fcntl.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <catch2/catch.hpp>
@@ -384,4 +385,114 @@ TEST_CASE("number parsing helpers are exact and strict", "[io]") {
   s.clear();
   pdt::detail::append_double(s, 1e308);
   CHECK(s == "1e+308");
+}
+
+TEST_CASE("OpWriter writes a stream one operation at a time, text and binary, bit-exact", "[io]") {
+  const pdt::OpStream s = tricky_stream();
+  for (const char* name : {"w.ops", "w.opsb"}) {
+    INFO(name);
+    TempDir d;
+    const std::string p = d.file(name);
+    pdt::OpWriter w(p, s.box);
+    CHECK_FALSE(std::filesystem::exists(p));  // written to a temporary file until close()
+    std::uint64_t inserted = 0;
+    for (const pdt::Operation& op : s.ops) {
+      if (op.kind == pdt::Operation::Kind::insert)
+        CHECK(w.insert(op.point) == inserted++);  // its index, as 'r k' names it
+      else
+        w.remove(op.target);
+    }
+    CHECK(w.operations_written() == s.ops.size());
+    CHECK(w.insertions_written() == inserted);
+    w.close();
+    require_same(s, pdt::read_ops(p));
+    CHECK(d.entries() == 1);  // no temporary file left over
+    const std::string bytes = pdt_test::read_file(p);
+    if (std::string(name) == "w.opsb") {
+      CHECK(std::memcmp(bytes.data(), "PDTOPS1\0", 8) == 0);
+      CHECK(static_cast<unsigned char>(bytes[57]) == s.ops.size());  // the count, patched at close()
+    } else {
+      CHECK(bytes.rfind("# pdt operation stream", 0) == 0);
+    }
+    auto e = catch_error([&] { w.insert({0, 0, 0}); });  // closed
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("closed") != std::string::npos);
+  }
+}
+
+TEST_CASE("OpWriter refuses what read_ops would reject and writes nothing for it", "[io]") {
+  TempDir d;
+  const std::string p = d.file("w.ops");
+  pdt::OpWriter w(p, pdt::Box{{0, 0, 0}, {1, 1, 1}});
+  w.insert({0.5, 0.5, 0.5});
+  w.insert({0.25, 0.5, 0.5});
+  w.remove(0);
+  auto refused = [&](auto&& call, const char* what) {
+    auto e = catch_error(call);
+    REQUIRE(e);
+    INFO(e->what());
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find(what) != std::string::npos);
+  };
+  refused([&] { w.insert({2, 0, 0}); }, "outside the box");
+  refused([&] { w.insert({std::nan(""), 0, 0}); }, "NaN or infinite");
+  refused([&] { w.remove(0); }, "already undone");
+  refused([&] { w.remove(2); }, "not been written yet");
+  CHECK(w.operations_written() == 3);
+  w.remove(1);
+  w.close();
+  const pdt::OpStream back = pdt::read_ops(p);
+  REQUIRE(back.ops.size() == 4);
+  CHECK(back.insert_count() == 2);
+  auto e = catch_error([&] { pdt::OpWriter bad(d.file("b.ops"), pdt::Box{{1, 0, 0}, {0, 1, 1}}); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  CHECK_FALSE(std::filesystem::exists(d.file("b.ops")));
+}
+
+TEST_CASE("OpWriter not closed leaves no file and an older one as it was; binary needs a seekable file", "[io]") {
+  TempDir d;
+  const std::string p = d.file("w.opsb");
+  write_file(p, "older");
+  {
+    pdt::OpWriter w(p);
+    w.insert({1, 2, 3});
+  }  // destroyed without close(): a failed run
+  CHECK(pdt_test::read_file(p) == "older");
+  CHECK(d.entries() == 1);
+  // Moved: the new owner closes it.
+  pdt::OpWriter a(d.file("m.ops"));
+  a.insert({1, 2, 3});
+  pdt::OpWriter b = std::move(a);
+  b.remove(0);
+  b.close();
+  CHECK(pdt::read_ops(d.file("m.ops")).ops.size() == 2);
+
+  // A FIFO: text is written in place; binary, whose count is patched at
+  // close(), is refused before anything is written.
+  const std::string fifo = d.file("pipe.opsb");
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const int rd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  REQUIRE(rd >= 0);
+  auto e = catch_error([&] { pdt::OpWriter w(fifo); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  CHECK(std::string(e->what()).find("text form") != std::string::npos);
+  const std::string text_fifo = d.file("pipe.ops");
+  REQUIRE(::mkfifo(text_fifo.c_str(), 0600) == 0);
+  const int rd2 = ::open(text_fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  REQUIRE(rd2 >= 0);
+  {
+    pdt::OpWriter w(text_fifo);
+    w.insert({1, 2, 3});
+    w.close();
+  }
+  std::string got;
+  char buf[4096];
+  for (ssize_t n; (n = ::read(rd2, buf, sizeof buf)) > 0;) got.append(buf, static_cast<std::size_t>(n));
+  ::close(rd);
+  ::close(rd2);
+  CHECK(std::filesystem::is_fifo(text_fifo));
+  CHECK(got.find("\ni 1 2 3\n") != std::string::npos);
 }

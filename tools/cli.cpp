@@ -31,6 +31,13 @@ void require_writable_dir(const char* option, const std::string& path) {
                                                      "': " + std::strerror(err));
 }
 
+void require_stream_output_name(const char* usage, const char* option, const std::string& path) {
+  if (pdt::support::ends_with_nocase(path, ".gz"))
+    usage_error(usage, std::string(option) + " " + path +
+                           ": pdt writes streams uncompressed (it reads them gzipped); name it FILE.ops or FILE.opsb "
+                           "and gzip it afterwards");
+}
+
 bool Args::option(const char* name, bool takes_value) {
   const std::string& a = a_[i_];
   const std::size_t n = std::strlen(name);

@@ -47,6 +47,9 @@ double parse_real_option(const Args& args, const char* name, const std::string& 
 // not writable (pdt::Error io_failure naming the option and the path); the
 // write itself may still fail later (a full disk), and says so then.
 void require_writable_dir(const char* option, const std::string& path);
+// An operation stream's output name: refused (usage) if it ends in .gz, since
+// pdt writes streams uncompressed (and reads them gzipped).
+void require_stream_output_name(const char* usage, const char* option, const std::string& path);
 
 std::string box_string(const pdt::Box& b);
 // One "key   value" line of a command's summary.

@@ -63,6 +63,7 @@ int cmd_gen(Args args) {
   }
   if (!have_points) usage_error(gen_usage, "gen needs --points N");
   if (!out || out->empty()) usage_error(gen_usage, "gen needs --out FILE");
+  require_stream_output_name(gen_usage, "--out", *out);
   pdt::support::Stopwatch sw;
   const pdt::OpStream s = pdt::generate(o);
   pdt::write_ops(*out, s);

@@ -43,7 +43,7 @@ const char* const refine_usage =
     "  --out FILE      FILE.vtu: the tetrahedra inside D (centroid inside), with per-cell\n"
     "                  radius_edge_ratio, min_dihedral_angle and domain_label;\n"
     "                  FILE.node: the whole triangulation (TetGen .node + .ele)\n"
-    "  --trace FILE    write the operations carried out as a stream (.ops), which\n"
+    "  --trace FILE    write the operations carried out as a stream (.ops text, .opsb binary), which\n"
     "                  `pdt run FILE --threads N` replays\n"
     "  --validate      check every invariant of the final triangulation\n"
     "Exit status: 0 done, 1 a bound is missed, the budget stopped it unfinished, or validation\n"
@@ -126,6 +126,7 @@ int cmd_refine(Args args) {
     usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
   if (out) require_writable_dir("--out", *out);  // before the run, so a typo cannot waste it
   if (trace && trace->empty()) usage_error(refine_usage, "--trace needs a file name");
+  if (trace) require_stream_output_name(refine_usage, "--trace", *trace);
   pdt_refine::RefineOptions o;
   try {
     o.domain = pdt_refine::domain_by_name(*domain_name);

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -399,6 +400,10 @@ int cmd_run(Args args) {
     }
   }
   if (!input) usage_error(run_usage, "run needs an input file");
+  for (const char* ext : {".ply.gz", ".off.gz", ".node.gz", ".smesh.gz"})
+    if (ends_with_nocase(*input, ext))
+      usage_error(run_usage, *input + ": gzipped " + std::string(ext, std::strlen(ext) - 3) +
+                                 " files are not read (.xyz.gz and streams are); gunzip it first");
   enum class OutKind { none, tetgen, vtu } out_kind = OutKind::none;
   if (out) {
     // Decide before the (possibly long) run, so a typo cannot waste it.

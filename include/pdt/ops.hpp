@@ -78,4 +78,42 @@ OpStream read_ops(const std::string& path);
 // is refused with pdt::Error(invalid_argument) before anything is written.
 void write_ops(const std::string& path, const OpStream& stream);
 
+// Writes a stream one operation at a time, as a refiner records what it does
+// while it does it, without holding the stream (write_ops writes a whole
+// OpStream). Text, or binary when the path ends with ".opsb". The data goes to
+// a temporary file beside the path, renamed onto it by close(): a writer
+// destroyed without close() (an exception, a failed run) leaves no partial
+// stream and an older file of that name as it was. A path that is not a
+// regular file (a FIFO, /dev/stdout) is written in place, as every pdt writer
+// does; the binary form announces its count in its header, patched by
+// close(), so it is refused (invalid_argument) for a path it cannot seek in.
+// Each operation is checked as read_ops would check it (finite, inside the
+// box, 'remove k' of an insertion written and not undone yet) and refused
+// with pdt::Error(invalid_argument), nothing written, so every file it closes
+// reads back. Write errors throw io_failure (the file is then discarded). Not
+// thread-safe: writers from several threads hold a mutex around each call.
+class OpWriter {
+ public:
+  explicit OpWriter(const std::string& path, const std::optional<Box>& box = std::nullopt);
+  ~OpWriter();
+  OpWriter(OpWriter&&) noexcept;
+  OpWriter& operator=(OpWriter&&) noexcept;  // the file this writer had open is discarded
+  // Writes an insertion; returns its index k (0, 1, ... in writing order),
+  // which remove(k) names.
+  std::uint64_t insert(const Point3& p);
+  void remove(std::uint64_t k);  // undoes insertion k
+  void write(const Operation& op);
+  std::uint64_t operations_written() const;
+  std::uint64_t insertions_written() const;
+  // Flushes, patches the count (binary), checks, renames onto the path.
+  // After close() (or a failed one) every call but the destructor is
+  // refused with invalid_argument.
+  void close();
+  const std::string& path() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
 }  // namespace pdt

@@ -5,20 +5,16 @@
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <coroutine>
 #include <cstdio>
-#include <cstring>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <thread>
 #include <unordered_map>
@@ -65,79 +61,48 @@ class CellTable {
   std::unique_ptr<std::atomic<Chunk*>[]> chunks_;
 };
 
-// The stream actually carried out, as an .ops file: each operation is
-// written by the change hook, inside the operation (so the file's order is
-// one in which conflicting operations happened), with insertions numbered in
-// that order and removals naming them.
+// The stream actually carried out, as an operation stream (pdt::OpWriter:
+// text, or binary for a .opsb name; a failed run leaves no partial trace):
+// each operation is written by the change hook, inside the operation (so the
+// file's order is one in which conflicting operations happened), with
+// insertions numbered in that order and removals naming them.
 class Trace {
  public:
-  // Written to a temporary file beside `path`, renamed onto it by close():
-  // a run that fails (a full disk, an error) leaves no partial trace and
-  // keeps an older file of that name as it was. A path that exists and is
-  // not a regular file (a symbolic link, a device, a FIFO) is written in
-  // place, as pdt's own writers do (a rename would replace it).
-  explicit Trace(const std::string& path, const pdt::Box& box) : path_(path) {
-    if (path.empty()) return;
-    struct stat st;
-    const bool in_place = ::lstat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode);
-    if (!in_place) temp_ = path + ".tmp." + std::to_string(::getpid());
-    f_ = std::fopen(in_place ? path.c_str() : temp_.c_str(), "w");
-    if (!f_)
-      throw pdt::Error(pdt::ErrorCode::io_failure,
-                       "cannot write the trace '" + path + "': " + std::strerror(errno));
-    std::fprintf(f_, "# pdt refine trace: the operations carried out, in an order they happened\n");
-    std::fprintf(f_, "box %.17g %.17g %.17g %.17g %.17g %.17g\n", box.lo.x, box.lo.y, box.lo.z, box.hi.x, box.hi.y,
-                 box.hi.z);
-  }
-  ~Trace() {
-    if (f_) {  // not closed: the run failed
-      std::fclose(f_);
-      if (!temp_.empty()) std::remove(temp_.c_str());
-    }
+  Trace(const std::string& path, const pdt::Box& box) {
+    if (!path.empty()) writer_.emplace(path, box);
   }
   void inserted(std::uint64_t incarnation, const Point3& p) {
-    if (!f_) return;
+    if (!writer_) return;
     std::lock_guard lock(m_);
-    std::fprintf(f_, "i %.17g %.17g %.17g\n", p.x, p.y, p.z);
-    index_of_[incarnation] = next_++;
+    index_of_[incarnation] = writer_->insert(p);
   }
   // A duplicate insertion and its undo (the refiner never keeps one): both
   // written, so the stream stays the one carried out.
   std::uint64_t duplicate(const Point3& p) {
-    if (!f_) return 0;
+    if (!writer_) return 0;
     std::lock_guard lock(m_);
-    std::fprintf(f_, "i %.17g %.17g %.17g\n", p.x, p.y, p.z);
-    return next_++;
+    return writer_->insert(p);
   }
   void removed_insertion(std::uint64_t k) {
-    if (!f_) return;
+    if (!writer_) return;
     std::lock_guard lock(m_);
-    std::fprintf(f_, "r %llu\n", static_cast<unsigned long long>(k));
+    writer_->remove(k);
   }
   void removed(std::uint64_t incarnation) {
-    if (!f_) return;
+    if (!writer_) return;
     std::lock_guard lock(m_);
     auto it = index_of_.find(incarnation);
     if (it == index_of_.end()) return;
-    std::fprintf(f_, "r %llu\n", static_cast<unsigned long long>(it->second));
+    writer_->remove(it->second);
     index_of_.erase(it);
   }
   void close() {
-    if (!f_) return;
-    const bool bad = std::ferror(f_) != 0;
-    const bool closed = std::fclose(f_) == 0;
-    f_ = nullptr;
-    if (!closed || bad || (!temp_.empty() && std::rename(temp_.c_str(), path_.c_str()) != 0)) {
-      if (!temp_.empty()) std::remove(temp_.c_str());
-      throw pdt::Error(pdt::ErrorCode::io_failure, "cannot write the trace '" + path_ + "' (disk full?)");
-    }
+    if (writer_) writer_->close();
   }
 
  private:
-  std::string path_, temp_;  // temp_ empty: writing path_ in place
-  std::FILE* f_ = nullptr;
+  std::optional<pdt::OpWriter> writer_;  // none: no trace asked for
   std::mutex m_;
-  std::uint64_t next_ = 0;
   std::unordered_map<std::uint64_t, std::uint64_t> index_of_;  // live vertex incarnation -> its insertion
 };
 

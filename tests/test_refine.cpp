@@ -169,6 +169,7 @@ TEST_CASE("refine: bad arguments are refused, naming the rule", "[refine][cli]")
                         Case{"refine --domain torus --size 0", "expected a positive number"},
                         Case{"refine --domain torus --size -1", "expected a positive number"},
                         Case{"refine --domain torus --size 0.1 --ratio 1.5", "at least 2"},
+                        Case{"refine --domain sphere --size 100", "too large for the sphere domain"},
                         Case{"refine --domain torus", "needs --size"},
                         Case{"refine --size 0.1", "needs --domain"},
                         Case{"refine --domain torus --size 0.1 --out mesh.stl", "expected a name ending in .vtu"}}) {
@@ -182,25 +183,35 @@ TEST_CASE("refine: bad arguments are refused, naming the rule", "[refine][cli]")
 TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   if (!have_tool()) return;
   TempDir d;
-  const Result r = run_pdt(d, "refine --domain sphere --size 0.05 --threads 2 --budget 2000");
+  const Result r = run_pdt(d, "refine --domain sphere --size 0.05 --threads 2 --budget 10000");
   INFO("stdout:\n" << r.out);
   CHECK(r.code == 1);  // the bounds are missed
-  CHECK(r.out.find("the point budget of 2,000 was hit") != std::string::npos);
-  // A budget below the starting lattice (here 17 points: the corners and 9
-  // seeds), or below the corners, stops it before any refinement: still
-  // unfinished, still said, and never more points than the budget.
+  CHECK(r.out.find("the point budget of 10,000 was hit") != std::string::npos);
+  {
+    const std::size_t at = r.out.find("insertions");
+    REQUIRE(at != std::string::npos);
+    CHECK(std::stoul(r.out.substr(r.out.find_first_of("0123456789", at))) <= 10000);
+  }
+  // The surface samples (512 on the torus at 0.2) go in before the end: a
+  // budget below them and the corners stops it before anything is inserted,
+  // saying why.
   for (const char* budget : {"12", "5"}) {
     const Result small = run_pdt(d, std::string("refine --domain torus --size 0.2 --threads 2 --budget ") + budget);
     INFO("stdout:\n" << small.out);
     CHECK(small.code == 1);
-    CHECK(small.out.find(std::string("the point budget of ") + budget + " was hit") != std::string::npos);
-    const std::size_t at = small.out.find("insertions");
-    REQUIRE(at != std::string::npos);
-    CHECK(std::stoul(small.out.substr(small.out.find_first_of("0123456789", at))) <= std::stoul(budget));
+    // (Below 512 / 64 the sampling stops early, and says "more".)
+    CHECK(small.out.find("the surface alone needs " + std::string(std::stoul(budget) >= 8 ? "512" : "more") +
+                         " sample points, over the point budget of " + budget) != std::string::npos);
   }
-  // The surface samples that do not fit the budget: the same.
+  // Samples that fit, but not with the starting lattice (17 points): hit at the end.
   const Result samples = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 528");
   INFO("stdout:\n" << samples.out);
   CHECK(samples.code == 1);
   CHECK(samples.out.find("the point budget of 528 was hit") != std::string::npos);
+  // A size whose surface needs millions of samples, under a small budget:
+  // the sampling stops early (it took minutes and gigabytes before).
+  const Result tiny = run_pdt(d, "refine --domain gyroid --size 1e-3 --threads 2 --budget 100");
+  INFO("stdout:\n" << tiny.out);
+  CHECK(tiny.code == 1);
+  CHECK(tiny.out.find("the surface alone needs more sample points, over the point budget of 100") != std::string::npos);
 }

@@ -39,7 +39,8 @@ const char* const refine_usage =
     "  --ratio B       the radius-edge bound, at least 2 (default 2)\n"
     "  --threads N     the engine's workers (default: all cores)\n"
     "  --seed S        which surface samples are kept (default 1)\n"
-    "  --budget N      stop after N points (default 20,000,000); reported when hit\n"
+    "  --budget N      stop after N points (default 20,000,000); reported when hit, and a surface\n"
+    "                  whose samples alone exceed it is refused before anything is inserted\n"
     "  --out FILE      FILE.vtu: the tetrahedra inside D (centroid inside), with per-cell\n"
     "                  radius_edge_ratio, min_dihedral_angle and domain_label;\n"
     "                  FILE.node: the whole triangulation (TetGen .node + .ele)\n"
@@ -150,6 +151,15 @@ int cmd_refine(Args args) {
   pdt::Triangulation t;
   const pdt_refine::RefineStats st = pdt_refine::refine(t, o);
   if (tty) std::fputs("\r\033[K", stderr);
+  if (st.samples_over_budget) {
+    // Nothing was refined: the surface's samples alone exceed the budget.
+    row("domain", o.domain.name + ", size " + pdt::support::format_double(o.size));
+    row("bounds", "unfinished: at this size the surface alone needs " +
+                      (st.surface_samples ? format_count(st.surface_samples) : std::string("more")) +
+                      " sample points, over the point budget of " + format_count(o.budget) + " (raise --budget or --size)");
+    std::fflush(stdout);
+    return 1;
+  }
   const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed);
 
   char buf[256];
@@ -158,8 +168,9 @@ int cmd_refine(Args args) {
   row("threads", std::to_string(st.workers) + " workers (parallel engine, allocator " + pdt::allocator_name() + ")");
   row("vertices", format_count(t.number_of_vertices()));
   row("tets inside", format_count(q.inside) + " (of " + format_count(t.number_of_finite_cells()) + ")");
-  row("insertions", format_count(st.insertions) + " (" + format_count(st.circumcentres) + " circumcentres, " +
-                        format_count(st.samples) + " of " + format_count(st.surface_samples) + " surface samples)");
+  row("insertions", format_count(st.insertions) + " (" + format_count(st.start_points) + " starting points: the box's corners and a lattice; " +
+                        format_count(st.circumcentres) + " circumcentres; " + format_count(st.samples) + " of " +
+                        format_count(st.surface_samples) + " surface samples)");
   row("removals", format_count(st.removals) + " (vertices too close to a surface sample)");
   row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
   std::snprintf(buf, sizeof buf,

@@ -126,11 +126,11 @@ struct Detached {
 class Refiner {
  public:
   // threads: the arena's; one queue of bad cells per thread.
-  Refiner(const RefineOptions& o, pdt::Engine& e, Trace& trace, unsigned threads)
+  Refiner(const RefineOptions& o, pdt::Engine& e, Trace& trace, unsigned threads, std::vector<Point3> samples)
       : o_(o),
         e_(e),
         trace_(trace),
-        samples_(surface_samples(o.domain, o.size, o.seed), 0.5 * o.size),
+        samples_(std::move(samples), 0.5 * o.size),
         snap_(snap_radius(o.size)),
         protect_(protect_radius(o.size)),
         lanes_(std::max(1u, threads)) {}
@@ -247,11 +247,18 @@ class Refiner {
   // against exactly cospherical cells), so that its cells have circumcentres
   // inside and refinement has somewhere to start.
   void start() {
+    // Every sample goes in before the end: if they and the corners exceed
+    // the budget, no run can finish within it.
+    if (!within_budget(8 + samples_.size())) {
+      samples_over_budget_.store(true);
+      return;
+    }
     const pdt::Box& b = o_.domain.box;
     for (int k = 0; k < 8; ++k) {
       if (!within_budget(1)) return;
       corners_[k] = {k & 1 ? b.hi.x : b.lo.x, k & 2 ? b.hi.y : b.lo.y, k & 4 ? b.hi.z : b.lo.z};
       insertions_.fetch_add(1);
+      start_points_.fetch_add(1);
       corner_now_.store(k);
       e_.insert(corners_[k], {});
       e_.drain();  // one at a time: the hook knows which corner it sees
@@ -269,6 +276,7 @@ class Refiner {
         }
     if (!within_budget(seeds.size())) return;
     insertions_.fetch_add(seeds.size());
+    start_points_.fetch_add(seeds.size());
     e_.insert_batch(seeds);
     e_.drain();
   }
@@ -313,6 +321,8 @@ class Refiner {
     st.protected_skipped = protected_.load();
     st.budget_hit = budget_hit_.load();
     st.surface_samples = samples_.size();
+    st.start_points = start_points_.load();
+    st.samples_over_budget = samples_over_budget_.load();
   }
 
  private:
@@ -359,9 +369,9 @@ class Refiner {
   std::vector<Lane> lanes_;
   std::array<Point3, 8> corners_{};
   std::atomic<int> corner_now_{-1};  // the corner being inserted, while start() runs
-  std::atomic<bool> stop_{false}, budget_hit_{false};
+  std::atomic<bool> stop_{false}, budget_hit_{false}, samples_over_budget_{false};
   std::atomic<std::uint64_t> insertions_{0}, samples_inserted_{0}, circumcentres_{0}, removals_{0},
-      protected_{0};
+      protected_{0}, start_points_{0};
 };
 
 }  // namespace
@@ -386,11 +396,32 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
       std::max<std::size_t>(threads + 1, tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
   tbb::task_arena arena(static_cast<int>(threads), 0);
   Trace trace(o.trace, o.domain.box);
+  // The surface samples, unless they alone exceed the budget: each kept
+  // sample stands for a few crossed cells (those whose projected centres
+  // fall within spacing / 2 of it: about 1.5, never near 64), so past 64 per
+  // budgeted point the sampling stops, and with it the run.
+  bool too_many = false;
+  const std::size_t cap = o.budget >= SIZE_MAX / 64 - 1 ? SIZE_MAX : static_cast<std::size_t>(64 * (o.budget + 1));
+  std::vector<Point3> samples = surface_samples(o.domain, o.size, o.seed, cap, &too_many);
+  if (!too_many && samples.empty()) {
+    char why[256];
+    std::snprintf(why, sizeof why,
+                  "the size bound %g is too large for the %s domain: no point of its surface is sampled at that "
+                  "spacing (its box is %g across); give a smaller size",
+                  o.size, o.domain.name.c_str(), extent);
+    bad(why);
+  }
+  if (too_many) {
+    st.budget_hit = st.samples_over_budget = true;
+    trace.close();
+    st.seconds = seconds();
+    return st;
+  }
   {
     pdt::EngineOptions eo = pdt::EngineOptions::from_environment();
     eo.workers = o.workers;
     pdt::Engine e(t, o.domain.box, eo, &arena);
-    Refiner r(o, e, trace, threads);
+    Refiner r(o, e, trace, threads, std::move(samples));
     e.set_change_hook([&r](const pdt::Changes& c) { r.on_change(c); }, true);
     r.start();
     // Rounds: refiner coroutines until the queue is empty, then drain (the

@@ -60,7 +60,11 @@ struct RefineStats {
   std::uint64_t dead_skipped = 0;  // queued cells found dead when their turn came
   std::uint64_t protected_skipped = 0;  // bad cells left in the protected layer
   std::uint64_t surface_samples = 0;  // samples available
+  std::uint64_t start_points = 0;     // the box's corners and the starting lattice
   bool budget_hit = false;
+  // The surface's samples alone exceed the budget: nothing was refined
+  // (surface_samples: their number, or 0 when the sampling stopped early).
+  bool samples_over_budget = false;
   double seconds = 0;
   pdt::EngineStats engine;
   unsigned workers = 0;

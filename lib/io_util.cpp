@@ -192,6 +192,10 @@ bool InputFile::fill() {
 }
 
 bool InputFile::read_line(std::string_view& line) {
+  auto too_long = [&] {
+    ++line_;
+    fail("line longer than 1 MiB; this is not a text file of the expected format");
+  };
   std::size_t scanned = pos_;
   while (true) {
     const char* base = buf_.data();
@@ -199,6 +203,7 @@ bool InputFile::read_line(std::string_view& line) {
     if (nl != nullptr) {
       std::size_t e = static_cast<std::size_t>(static_cast<const char*>(nl) - base);
       std::size_t len = e - pos_;
+      if (len > kMaxLine) too_long();  // found within the last fill, which may read past the limit
       if (len > 0 && base[e - 1] == '\r') --len;
       line = std::string_view(base + pos_, len);
       consumed_ += e + 1 - pos_;
@@ -207,14 +212,12 @@ bool InputFile::read_line(std::string_view& line) {
       return true;
     }
     std::size_t pending = end_ - pos_;
-    if (pending > kMaxLine) {
-      ++line_;
-      fail("line longer than 1 MiB; this is not a text file of the expected format");
-    }
+    if (pending > kMaxLine) too_long();
     if (!fill()) {
       if (end_ == pos_) return false;
       // Last line without a newline.
       std::size_t len = end_ - pos_;
+      if (len > kMaxLine) too_long();
       if (buf_[end_ - 1] == '\r') --len;
       line = std::string_view(buf_.data() + pos_, len);
       consumed_ += end_ - pos_;
@@ -314,7 +317,12 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
     }
     std::free(resolved);
   }
-  if (!direct_ && ::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode)) direct_ = true;
+  if (!direct_ && ::stat(target_.c_str(), &st) == 0 && !S_ISREG(st.st_mode)) {
+    // A directory cannot be written or renamed onto: refused now, before
+    // anything is written (of TetGen's two files, neither is replaced).
+    if (S_ISDIR(st.st_mode)) throw_io_error("cannot write", path, EISDIR);
+    direct_ = true;
+  }
   if (direct_) {
     fd_ = ::open(target_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
     if (fd_ < 0) throw_io_error("cannot open", path, errno);

@@ -326,6 +326,7 @@ Mesh read_tetgen(const std::string& path) {
   {
     detail::InputFile nf(base + ".node");
     m.points = detail::read_node_section(nf, &first);
+    detail::require_end(nf, "the " + std::to_string(m.points.size()) + " nodes its header announces");
   }
   detail::InputFile f(base + ".ele");
   std::string_view fields[16];
@@ -363,6 +364,7 @@ Mesh read_tetgen(const std::string& path) {
     }
     m.tets.push_back(t);
   }
+  detail::require_end(f, "the " + std::to_string(count) + " tetrahedra its header announces");
   return m;
 }
 

@@ -409,10 +409,18 @@ std::vector<Point3> read_smesh(InputFile& f) {
   // "0 3 0 0": TetGen's convention for "the nodes are in the .node file beside".
   const std::string node = strip_ext(f.path(), ".smesh") + ".node";
   InputFile nf(node);
-  return read_node_section(nf, &first);
+  pts = read_node_section(nf, &first);
+  require_end(nf, "the " + std::to_string(pts.size()) + " nodes its header announces");
+  return pts;
 }
 
 }  // namespace
+
+void require_end(InputFile& f, const std::string& what) {
+  std::string_view fields[1];
+  std::size_t n = 0;
+  if (next_content_line(f, fields, 1, n)) f.fail("a line after " + what + "; expected the file to end there");
+}
 
 std::vector<Point3> read_node_section(InputFile& f, std::uint64_t* first_index) {
   std::string_view fields[8];
@@ -460,7 +468,11 @@ std::vector<Point3> read_points(const std::string& path) {
     case Kind::xyz: return detail::read_xyz(f);
     case Kind::ply: return detail::read_ply(f);
     case Kind::off: return detail::read_off(f);
-    case Kind::node: return detail::read_node_section(f, nullptr);
+    case Kind::node: {
+      std::vector<Point3> pts = detail::read_node_section(f, nullptr);
+      detail::require_end(f, "the " + std::to_string(pts.size()) + " nodes its header announces");
+      return pts;
+    }
     case Kind::smesh: return detail::read_smesh(f);
   }
   return {};

@@ -15,5 +15,9 @@ namespace pdt::detail {
 // (dim must be 3), then N lines "index x y z [attributes] [marker]" with
 // consecutive indices from the first one (0 or 1, returned in first_index).
 std::vector<Point3> read_node_section(InputFile& f, std::uint64_t* first_index);
+// At the end of a file whose header counts its lines (a .node, a .ele):
+// bad_format at the first line with content left, naming the count (`what`:
+// "the 12 nodes the header announces"). Blank and comment lines may follow.
+void require_end(InputFile& f, const std::string& what);
 
 }  // namespace pdt::detail

@@ -369,6 +369,35 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
   REQUIRE(e);
   CHECK(e->code() == pdt::ErrorCode::bad_format);
   CHECK(std::string(e->what()).find("one.ele:2:") != std::string::npos);
+  // More rows than the header announces: a format error at the first extra
+  // one (in either file); a trailing comment is fine.
+  write_file(d.file("one.ele"), "1 4 0\n1 1 2 3 4\n# by TetGen\n2 1 2 3 4\n");
+  e = catch_error([&] { pdt::read_tetgen(d.file("one.node")); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::bad_format);
+  CHECK(std::string(e->what()).find("one.ele:4: a line after the 1 tetrahedra its header announces") !=
+        std::string::npos);
+  write_file(d.file("one.ele"), "1 4 0\n1 1 2 3 4\n# by TetGen\n");
+  write_file(d.file("one.node"), "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 1 1 1\n");
+  e = catch_error([&] { pdt::read_tetgen(d.file("one.node")); });
+  REQUIRE(e);
+  CHECK(std::string(e->what()).find("one.node:6: a line after the 4 nodes") != std::string::npos);
+  e = catch_error([&] { pdt::read_points(d.file("one.node")); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::bad_format);
+  // A directory where one of the two files goes: refused before either is
+  // written, so an older pair stays a pair.
+  pdt::write_tetgen(d.file("pair"), m);
+  const std::string old_node = pdt_test::read_file(d.file("pair.node"));
+  std::filesystem::remove(d.file("pair.ele"));
+  std::filesystem::create_directory(d.file("pair.ele"));
+  pdt::Mesh other = m;
+  other.points[0].x = 0.5;
+  e = catch_error([&] { pdt::write_tetgen(d.file("pair"), other); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::io_failure);
+  CHECK(std::string(e->what()).find("Is a directory") != std::string::npos);
+  CHECK(pdt_test::read_file(d.file("pair.node")) == old_node);
   // Bad index in the writer's input.
   m.tets.push_back({0, 1, 2, 9});
   auto e2 = catch_error([&] { pdt::write_tetgen(d.file("bad"), m); });

@@ -496,3 +496,15 @@ TEST_CASE("OpWriter not closed leaves no file and an older one as it was; binary
   CHECK(std::filesystem::is_fifo(text_fifo));
   CHECK(got.find("\ni 1 2 3\n") != std::string::npos);
 }
+
+TEST_CASE("a line over 1 MiB is refused, as the message says, wherever the buffer ends", "[io]") {
+  // 1.5 MiB (found within one buffer fill past the limit) and 3 MiB.
+  for (std::size_t len : {std::size_t{3} << 19, std::size_t{3} << 20}) {
+    INFO(len << " bytes");
+    expect_bad("i 0 0 0\n# " + std::string(len, 'x') + "\ni 1 1 1\n", 2, "line longer than 1 MiB");
+  }
+  // Just under the limit: a comment like any other.
+  TempDir d;
+  write_file(d.file("ok.ops"), "# " + std::string((std::size_t{1} << 20) - 8, 'x') + "\ni 1 1 1\n");
+  CHECK(pdt::read_ops(d.file("ok.ops")).ops.size() == 1);
+}

@@ -13,20 +13,28 @@ namespace pdt::detail {
 thread_local const EngineState* EngineState::running_engine = nullptr;
 
 void EngineState::spawn(std::coroutine_handle<> h) {
-  arena->execute([&] {
-    tasks.run([this, h] {
-      const EngineState* outer = running_engine;
-      running_engine = this;
-      try {
-        h.resume();
-      } catch (...) {
-        // A client coroutine whose promise rethrows: its exception must not
-        // reach the task group (it would cancel the engine's other tasks).
-        record_client_error(std::current_exception());
-      }
-      running_engine = outer;
-    });
-  });
+  auto task = [this, h] {
+    const EngineState* outer = running_engine;
+    running_engine = this;
+    try {
+      h.resume();
+    } catch (...) {
+      // A client coroutine whose promise rethrows: its exception must not
+      // reach the task group (it would cancel the engine's other tasks).
+      record_client_error(std::current_exception());
+    }
+    running_engine = outer;
+  };
+  // From one of this engine's own tasks (in its arena): spawned on this
+  // thread's deque. From anywhere else (a submitter's thread, another
+  // arena): enqueued, which never waits. arena->execute() would make the
+  // submitter wait for a free slot in the arena, that is for a worker thread,
+  // so a submitter holding a lock that a hook or callback takes deadlocked.
+  // The deferred task counts in `tasks` from now on, so drain() waits for it.
+  if (running_engine == this)
+    tasks.run(std::move(task));
+  else
+    arena->enqueue(tasks.defer(std::move(task)));
 }
 
 // ---------------------------------------------------------------------------

@@ -681,6 +681,61 @@ TEST_CASE("engine: several threads submit at once", "[engine][tsan]") {
   require_same_as_cgal(t, expected);
 }
 
+TEST_CASE("engine: submitting never waits for a worker, so a submitter may hold a lock its hook takes",
+          "[engine][tsan]") {
+  // The arena (one thread, two slots) is full: its thread runs the first
+  // insertion, whose change hook waits for m, which the submitter holds, and
+  // another outside thread sits in the second slot. The submitter then
+  // submits to idle workers, which must be started. When a submission
+  // entered the arena for that (task_arena::execute), it waited for a free
+  // slot or thread: a deadlock (found with producers booking tickets under a
+  // lock the hook also takes). Now it enqueues and returns at once.
+  pdt::Triangulation t;
+  std::mutex m;
+  std::atomic<int> in_hook{0};
+  std::atomic<bool> occupant_in{false}, submitted{false}, finished{false};
+  std::thread stall_check([&] {
+    for (int waited = 0; !finished.load(); ++waited) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      if (waited > (kTsan ? 1200 : 300)) {
+        std::fprintf(stderr, "\n[submit-lock test] stuck for 30 s (submissions returned: %d): a submission waits "
+                             "for the arena\n", submitted.load() ? 1 : 0);
+        std::_Exit(1);
+      }
+    }
+  });
+  {
+    tbb::task_arena arena(1, 0);
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(8), &arena);
+    e.set_change_hook([&](const pdt::Changes&) {
+      in_hook.fetch_add(1);
+      std::lock_guard lock(m);
+    });
+    std::thread occupant;
+    {
+      std::unique_lock lock(m);
+      (void)e.insert(Point3{0.01, 0.02, 0.03}, {});
+      while (in_hook.load() == 0) std::this_thread::yield();  // the arena's thread waits for m
+      occupant = std::thread([&] {
+        arena.execute([&] {
+          occupant_in.store(true);
+          while (!submitted.load()) std::this_thread::yield();
+        });
+      });
+      while (!occupant_in.load()) std::this_thread::yield();
+      // Points all over: the other workers' homes, idle, so they are started.
+      for (const Point3& p : random_points(64, 5)) (void)e.insert(p, {});
+      submitted.store(true);
+    }
+    occupant.join();
+    e.drain();
+    CHECK(in_hook.load() == 65);
+  }
+  finished.store(true);
+  stall_check.join();
+  CHECK(t.number_of_vertices() == 65);
+}
+
 TEST_CASE("engine: duplicates, remove_insertion and immediate errors of the callback form", "[engine]") {
   pdt::Triangulation t;
   const std::vector<Point3> base = random_points(500, 91);

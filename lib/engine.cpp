@@ -196,9 +196,11 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
         options.contention_high <= 1))
     bad("contention thresholds must satisfy 0 <= contention_low <= contention_high <= 1");
   if (options.workers == 0) options.workers = options.threads;  // the 0.1 name
-  if (options.workers > 4096) bad("workers must be at most 4096");
-  if (options.blocks_per_axis > detail::Partition::max_blocks_per_axis)
-    bad("blocks_per_axis must be at most " + std::to_string(detail::Partition::max_blocks_per_axis));
+  if (options.workers > EngineOptions::max_workers)
+    bad("workers must be at most " + std::to_string(EngineOptions::max_workers));
+  static_assert(EngineOptions::max_blocks_per_axis == detail::Partition::max_blocks_per_axis);
+  if (options.blocks_per_axis > EngineOptions::max_blocks_per_axis)
+    bad("blocks_per_axis must be at most " + std::to_string(EngineOptions::max_blocks_per_axis));
   if (options.contention_window == 0) options.contention_window = 1;
   tbb::task_arena attached(tbb::task_arena::attach{});
   tbb::task_arena* where = arena ? arena : &attached;
@@ -416,7 +418,9 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   // insertion order, copied (the caller's span may go), cut into runs of
   // consecutive points in one block, one record each.
   auto shared = std::make_unique<detail::BatchCallback>();
-  e.arena->execute([&] { shared->index = detail::spatial_order(points, true); });
+  // In the caller's arena, not the engine's: entering a full arena waits for
+  // its threads, which a hook may hold on a lock the caller has.
+  shared->index = detail::spatial_order(points, true);
   shared->points.resize(points.size());
   for (std::size_t k = 0; k < points.size(); ++k) shared->points[k] = points[shared->index[k]];
   shared->fn = std::move(done);
@@ -469,6 +473,13 @@ void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
   if (batch.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument, "remove_insertions: " + std::to_string(batch.size()) + " tickets; at most 2^32 - 2");
   if (batch.empty()) return;
+  {
+    std::vector<Ticket> sorted(batch.begin(), batch.end());
+    std::sort(sorted.begin(), sorted.end());
+    if (auto twice = std::adjacent_find(sorted.begin(), sorted.end()); twice != sorted.end())
+      throw Error(ErrorCode::unknown_vertex, "remove_insertions: ticket " + std::to_string(*twice) +
+                                                 " appears twice in the batch; each insertion is undone once");
+  }
   // All or nothing: claim every ticket, and give the claims back on the first bad one.
   std::vector<detail::TicketView> views(batch.size());
   for (std::size_t i = 0; i < batch.size(); ++i) {
@@ -492,7 +503,7 @@ void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
         detail::try_read_vertex(e.impl, views[i].vertex, views[i].stamp, &where[i], &stamp);
     }
     std::vector<std::uint32_t> order;
-    e.arena->execute([&] { order = detail::spatial_order(where, true); });
+    order = detail::spatial_order(where, true);  // in the caller's arena (as insert_batch)
     ops.reserve(batch.size());
     for (std::uint32_t i : order) ops.push_back(e.make_undo(batch[i], views[i], {}, shared.get()));
     shared->fn = std::move(done);

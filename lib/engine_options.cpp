@@ -2,6 +2,7 @@
 // EngineOptions from the environment, the allocator's name, summed statistics.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <string>
@@ -14,22 +15,43 @@ namespace pdt {
 
 namespace {
 
+// A plain decimal number: digits, at most one '.', then an optional
+// exponent (floating fields only): no sign, space, hex or "inf".
+bool plain_decimal(const char* s, bool fraction_allowed) {
+  const char* p = s;
+  bool digits = false;
+  while (*p >= '0' && *p <= '9') ++p, digits = true;
+  if (!fraction_allowed) return digits && *p == '\0';
+  if (*p == '.') {
+    ++p;
+    while (*p >= '0' && *p <= '9') ++p, digits = true;
+  }
+  if (!digits) return false;
+  if (*p == 'e' || *p == 'E') {
+    ++p;
+    if (*p == '+' || *p == '-') ++p;
+    if (!(*p >= '0' && *p <= '9')) return false;
+    while (*p >= '0' && *p <= '9') ++p;
+  }
+  return *p == '\0';
+}
+
+// Reads variable `name` into field if it is set: a whole number (integral
+// fields) or a decimal number (floating ones) in [0, most]; anything else is
+// refused naming the variable and the range.
 template <class T>
-bool env_number(const char* name, T& field) {
+bool env_number(const char* name, T& field, double most) {
   const char* s = std::getenv(name);
   if (!s || !*s) return false;
-  char* end = nullptr;
-  double v = std::strtod(s, &end);
-  bool ok = end && *end == '\0' && std::isfinite(v) && v >= 0;
-  std::string expected = "a non-negative number";
-  if constexpr (std::is_integral_v<T>) {  // whole, and in T's range: no silent wrap
-    const double most = std::min(1e12, static_cast<double>(std::numeric_limits<T>::max()));
-    ok = ok && v == std::floor(v) && v <= most;
-    expected = "a whole number from 0 to " + std::to_string(static_cast<unsigned long long>(most));
-  }
-  if (!ok)
+  constexpr bool whole = std::is_integral_v<T>;
+  if constexpr (whole) most = std::min(most, static_cast<double>(std::numeric_limits<T>::max()));
+  const double v = plain_decimal(s, !whole) ? std::strtod(s, nullptr) : -1;
+  if (!(v >= 0 && v <= most)) {
+    char range[96];
+    std::snprintf(range, sizeof range, whole ? "a whole number from 0 to %.0f" : "a number from 0 to %g", most);
     throw Error(ErrorCode::invalid_argument,
-                std::string(name) + "='" + s + "' is not a valid value (expected " + expected + ")");
+                std::string(name) + "='" + s + "' is not a valid value (expected " + range + ")");
+  }
   field = static_cast<T>(v);
   return true;
 }
@@ -37,23 +59,19 @@ bool env_number(const char* name, T& field) {
 }  // namespace
 
 EngineOptions EngineOptions::from_environment(EngineOptions o) {
-  if (!env_number("PDT_WORKERS", o.workers)) env_number("PDT_THREADS", o.workers);  // PDT_THREADS: the 0.1 name
-  env_number("PDT_BLOCKS_PER_AXIS", o.blocks_per_axis);
-  env_number("PDT_CONTENTION_LOW", o.contention_low);
-  env_number("PDT_CONTENTION_HIGH", o.contention_high);
-  env_number("PDT_CONTENTION_WINDOW", o.contention_window);
-  env_number("PDT_GRID_SLOTS", o.grid_slots);
-  env_number("PDT_ESCALATE_AFTER", o.escalate_after);
+  constexpr double any = 1e12;  // no bound of its own: the field's type bounds it
+  if (!env_number("PDT_WORKERS", o.workers, EngineOptions::max_workers))
+    env_number("PDT_THREADS", o.workers, EngineOptions::max_workers);  // PDT_THREADS: the 0.1 name
+  env_number("PDT_BLOCKS_PER_AXIS", o.blocks_per_axis, EngineOptions::max_blocks_per_axis);
+  env_number("PDT_CONTENTION_LOW", o.contention_low, 1);
+  env_number("PDT_CONTENTION_HIGH", o.contention_high, 1);
+  env_number("PDT_CONTENTION_WINDOW", o.contention_window, any);
+  env_number("PDT_GRID_SLOTS", o.grid_slots, any);
+  env_number("PDT_ESCALATE_AFTER", o.escalate_after, any);
   unsigned stealing = o.stealing ? 1 : 0;
-  if (env_number("PDT_STEALING", stealing)) {
-    if (stealing > 1) throw Error(ErrorCode::invalid_argument, "PDT_STEALING must be 0 or 1");
-    o.stealing = stealing == 1;
-  }
+  if (env_number("PDT_STEALING", stealing, 1)) o.stealing = stealing == 1;
   unsigned rebalance = o.rebalance ? 1 : 0;
-  if (env_number("PDT_REBALANCE", rebalance)) {
-    if (rebalance > 1) throw Error(ErrorCode::invalid_argument, "PDT_REBALANCE must be 0 or 1");
-    o.rebalance = rebalance == 1;
-  }
+  if (env_number("PDT_REBALANCE", rebalance, 1)) o.rebalance = rebalance == 1;
   return o;
 }
 

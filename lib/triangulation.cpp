@@ -2,6 +2,8 @@
 // pdt::Triangulation, the public face of the kernel: argument checking, then
 // the kernel's operations in the sequential context, and the queries.
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "pdt/error.hpp"
@@ -36,7 +38,17 @@ detail::OpContext& query_context() {
 }  // namespace
 
 Triangulation::Triangulation() : impl_(std::make_unique<Impl>()) {}
-Triangulation::~Triangulation() = default;
+Triangulation::~Triangulation() {
+  // An attached engine's workers and destructor still use this storage:
+  // going on would corrupt memory later, far from the cause. Stop here,
+  // naming the rule (a destructor cannot throw it).
+  if (impl_ && impl_->engine.load(std::memory_order_acquire) != nullptr) {
+    std::fputs("pdt: a Triangulation was destroyed while an Engine is attached to it; the triangulation must "
+               "outlive its engine (destroy the Engine first)\n",
+               stderr);
+    std::abort();
+  }
+}
 
 Triangulation::Triangulation(Triangulation&& o) {
   require_detached(*o.impl_, "move");

@@ -923,7 +923,9 @@ TEST_CASE("engine: remove_insertions undoes a batch, all or nothing", "[engine][
       std::vector<pdt::Engine::Ticket> evens;
       for (std::size_t i = 0; i < pts.size(); i += 2) evens.push_back(first + i);
       std::vector<pdt::Engine::Ticket> with_repeat = {first + 1, first + 3, first + 1};
-      repeated = error_of([&] { e.remove_insertions(with_repeat); });
+      std::string why;
+      repeated = error_of([&] { e.remove_insertions(with_repeat); }, &why);
+      CHECK(why.find("ticket " + std::to_string(first + 1) + " appears twice in the batch") != std::string::npos);
       std::vector<pdt::Engine::Ticket> with_unknown = {first + 1, first + pts.size() + 7};
       unknown = error_of([&] { e.remove_insertions(with_unknown); });
       e.remove_insertions(evens, errors.callback());
@@ -1045,8 +1047,8 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     EnvGuard env;
     env.set("PDT_WORKERS", "6");
     env.set("PDT_BLOCKS_PER_AXIS", "5");
-    env.set("PDT_CONTENTION_LOW", "0.25");
-    env.set("PDT_CONTENTION_HIGH", "0.5");
+    env.set("PDT_CONTENTION_LOW", ".25");  // decimal forms: a leading point, an exponent
+    env.set("PDT_CONTENTION_HIGH", "5e-1");
     env.set("PDT_CONTENTION_WINDOW", "64");
     env.set("PDT_GRID_SLOTS", "4096");
     const pdt::EngineOptions o = pdt::EngineOptions::from_environment();
@@ -1078,7 +1080,11 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
         {"PDT_CONTENTION_WINDOW", "1e99"}, {"PDT_GRID_SLOTS", " "},     {"PDT_CONTENTION_LOW", "inf"},
         // Past the field's range (32 bits): refused, not wrapped to 1 or 0.
         {"PDT_WORKERS", "4294967297"},   {"PDT_CONTENTION_WINDOW", "4294967296"},
-        {"PDT_ESCALATE_AFTER", "4294967360"}, {"PDT_BLOCKS_PER_AXIS", "4294967300"}};
+        {"PDT_ESCALATE_AFTER", "4294967360"}, {"PDT_BLOCKS_PER_AXIS", "4294967300"},
+        // Past the option's own range, and numbers that are not plain decimals.
+        {"PDT_WORKERS", "4097"}, {"PDT_BLOCKS_PER_AXIS", "65"}, {"PDT_CONTENTION_LOW", "1.5"},
+        {"PDT_STEALING", "2"}, {"PDT_WORKERS", "0x4"}, {"PDT_WORKERS", "1e1"}, {"PDT_WORKERS", "+3"},
+        {"PDT_WORKERS", " 3"}, {"PDT_WORKERS", "3 "}, {"PDT_ESCALATE_AFTER", "0x10"}, {"PDT_CONTENTION_HIGH", ".5e"}};
     for (const auto& [name, value] : bad) {
       EnvGuard env;
       env.set(name, value);
@@ -1088,6 +1094,12 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
       INFO(msg);
       REQUIRE(msg.find(name) != std::string::npos);
     }
+    // The message gives the option's real range.
+    EnvGuard env;
+    env.set("PDT_WORKERS", "5000");
+    std::string msg;
+    (void)error_of([] { (void)pdt::EngineOptions::from_environment(); }, &msg);
+    CHECK(msg.find("expected a whole number from 0 to 4096") != std::string::npos);
   }
 }
 

@@ -7,7 +7,14 @@
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <cmath>
 #include <coroutine>
 #include <mutex>
@@ -193,6 +200,35 @@ TEST_CASE("contract: an attached triangulation refuses mutation, and a second en
   require_valid(t);
   t.insert({0.75, 0.75, 0.75});  // detached again: allowed
   REQUIRE(t.number_of_vertices() == 202);
+}
+
+// Hidden (run by the next test in a process of its own): breaks the rule.
+TEST_CASE("contract (child): destroy a triangulation under its engine", "[.abort-child]") {
+  auto* t = new pdt::Triangulation;
+  auto* e = new pdt::Engine(*t, kUnit, options_with(2));
+  e->insert({0.5, 0.5, 0.5}, {});
+  e->drain();
+  delete t;  // stops the process here
+  std::puts("not stopped");
+}
+
+TEST_CASE("contract: destroying a triangulation under its engine stops with the rule, not a crash later",
+          "[engine][contract]") {
+  const std::string err = (std::filesystem::temp_directory_path() / ("pdt-abort-" + std::to_string(::getpid()))).string();
+  const std::string cmd = "'/proc/" + std::to_string(::getpid()) + "/exe' '[.abort-child]' > /dev/null 2> '" + err + "'";
+  const int status = std::system(cmd.c_str());
+  std::string text;
+  if (std::FILE* f = std::fopen(err.c_str(), "r")) {
+    char buf[4096];
+    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) text.append(buf, n);
+    std::fclose(f);
+  }
+  std::remove(err.c_str());
+  INFO(text);
+  REQUIRE(WIFEXITED(status));  // the shell reports the child's signal as 128 + n
+  CHECK(WEXITSTATUS(status) == 128 + SIGABRT);
+  CHECK(text.find("pdt: a Triangulation was destroyed while an Engine is attached to it; the triangulation must "
+                  "outlive its engine") != std::string::npos);
 }
 
 TEST_CASE("contract: a moved-from triangulation is empty and usable", "[engine][contract]") {

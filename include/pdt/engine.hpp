@@ -32,7 +32,8 @@
 //    it is attached. Engines may come and go on one triangulation, with
 //    sequential work in between; each leaves it valid.
 //  - Threads. Any thread may submit at any time, including from callbacks,
-//    hooks and coroutines the engine resumed. drain(), stats() and
+//    hooks and coroutines the engine resumed. Submitting never waits for the
+//    engine's workers (a submitter may hold a lock a hook also takes). drain(), stats() and
 //    in_flight() may be called from any thread outside the engine's work.
 //    The triangulation's const queries are safe after drain() returns and
 //    before the next submission; while operations are in flight, read through
@@ -161,7 +162,8 @@ class Engine {
   using Ticket = std::uint64_t;  // numbers the insertions submitted to this engine, from 0
 
   // Attaches to t. Points outside `domain` are refused. arena: where workers
-  // run; null = the caller's current arena. Throws pdt::Error(invalid_argument)
+  // run (it must outlive the engine, as t must); null = the caller's current
+  // arena, attached. Throws pdt::Error(invalid_argument)
   // for a bad domain or option, or when another engine is attached to t.
   Engine(Triangulation& t, const Box& domain, EngineOptions options = EngineOptions::from_environment(),
          tbb::task_arena* arena = nullptr);
@@ -187,7 +189,10 @@ class Engine {
   // the insertion are one operation. Such an insertion has no ticket.
   InsertAwaitable insert_if_alive(const Point3& p, CellHandle h);
   RemoveAwaitable remove(VertexId v);
-  RemoveAwaitable remove(VertexHandle v);  // that incarnation only
+  // That incarnation only; incarnation 0 (an empty handle's) names whichever
+  // is live, as remove(v.id) does (Triangulation::remove(VertexHandle)
+  // refuses it: there a handle must come from the triangulation).
+  RemoveAwaitable remove(VertexHandle v);
   LocateAwaitable locate(const Point3& p);
   NearestAwaitable nearest_vertex(const Point3& p);  // no_vertex if empty
   // Runs fn on h's cell under the engine's locks if that incarnation is still
@@ -204,7 +209,8 @@ class Engine {
   void nearest_vertex(const Point3& p, Callback done);
   void visit(CellHandle h, CellVisitor fn, Callback done);
   // A batch of insertions, submitted in spatial order (a biased randomized
-  // insertion order along a Hilbert curve, computed in the engine's arena, as
+  // insertion order along a Hilbert curve, computed in parallel in the
+  // caller's arena, so that submitting never waits for the engine's threads; as
   // CGAL's range insertion orders its points): each
   // worker then walks from its previous vertex, about twice as fast as a
   // random order. Insertion first + i inserts points[i]; first is returned.

@@ -7,7 +7,10 @@
 namespace pdt {
 
 struct EngineOptions {
-  // PDT_WORKERS: the engine's workers, 0 = the arena's concurrency. Workers are
+  static constexpr unsigned max_workers = 4096;
+  static constexpr unsigned max_blocks_per_axis = 64;
+  // PDT_WORKERS: the engine's workers (at most max_workers), 0 = the arena's
+  // concurrency. Workers are
   // C++20 coroutines run as oneTBB tasks, not threads: how many threads run
   // them is the task_arena's business (its concurrency), so 16 workers in an
   // arena of 2 threads is fine (and tests every interleaving the locks allow).
@@ -39,8 +42,11 @@ struct EngineOptions {
   // the result is the same triangulation either way.
   bool rebalance = true;
 
-  // Starts from `defaults` and overrides each field whose variable is set.
-  // Throws pdt::Error(invalid_argument) naming the variable for a bad value.
+  // Starts from `defaults` and overrides each field whose variable is set:
+  // a plain decimal number (no sign, spaces or hex; whole for integer
+  // fields), in the field's range (contention thresholds and the 0/1 flags
+  // included). Throws pdt::Error(invalid_argument) naming the variable and
+  // the range for a bad value.
   static EngineOptions from_environment(EngineOptions defaults);
   static EngineOptions from_environment();
 };

@@ -105,6 +105,9 @@ struct TriangulationStats {
 class Triangulation {
  public:
   Triangulation();
+  // Destroying a triangulation while an engine is attached to it breaks the
+  // rule that it outlives its engine: the process stops (std::abort) with a
+  // message naming the rule, instead of corrupting memory later.
   ~Triangulation();
   // Moving is refused (pdt::Error) while an engine is attached to either side.
   Triangulation(Triangulation&&);

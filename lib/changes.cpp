@@ -43,6 +43,11 @@ void Triangulation::Impl::end_report(OpContext& ctx, OpKind kind, VertexId v, st
   changes.vertex = {v, incarnation};
   changes.created = ctx.views;
   changes.destroyed = ctx.destroyed;
+  struct Running {  // cleared also when the hook throws
+    bool& flag;
+    ~Running() { flag = false; }
+  } running{ctx.in_hook};
+  ctx.in_hook = true;
   (*ctx.hook)(changes);
 }
 

@@ -101,6 +101,7 @@ struct OpContext {
   const ChangeHook* hook = nullptr;
   bool report_destroyed = false;
   bool recording = false;              // the current operation records its changes
+  bool in_hook = false;                // *hook is running (the sequential context: mutators refuse)
   std::vector<CellId> created;         // cells the current operation made
   std::vector<CellHandle> destroyed;   // cells it deleted (when report_destroyed)
   std::vector<CellView> views;         // the report's cells

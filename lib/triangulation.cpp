@@ -19,8 +19,15 @@ using detail::KPoint;
 using detail::require_finite;
 using detail::to_kpoint;
 
-// The rule every mutator checks: an attached engine owns the triangulation.
+// The rules every mutator checks: an attached engine owns the triangulation;
+// its own change hook reports a change still being made (changing it there,
+// or replacing the running hook, would pull the ground from under that call).
 void require_detached(const Triangulation::Impl& m, const char* what) {
+  if (m.seq && m.seq->in_hook)
+    throw Error(ErrorCode::invalid_argument,
+                std::string("Triangulation::") + what +
+                    " from the triangulation's own change hook: the hook reports a change still being made; note "
+                    "what to do and do it after the call that made the change returns");
   if (m.engine.load(std::memory_order_acquire) == nullptr) return;
   throw Error(ErrorCode::invalid_argument,
               std::string("Triangulation::") + what +
@@ -45,6 +52,12 @@ Triangulation::~Triangulation() {
   if (impl_ && impl_->engine.load(std::memory_order_acquire) != nullptr) {
     std::fputs("pdt: a Triangulation was destroyed while an Engine is attached to it; the triangulation must "
                "outlive its engine (destroy the Engine first)\n",
+               stderr);
+    std::abort();
+  }
+  if (impl_ && impl_->seq && impl_->seq->in_hook) {
+    std::fputs("pdt: a Triangulation was destroyed from its own change hook, while the change it reports is "
+               "being made; destroy it after that call returns\n",
                stderr);
     std::abort();
   }

@@ -991,3 +991,46 @@ TEST_CASE("a change hook that throws: the operation is done and the counts stay 
   }
   REQUIRE(t.dimension() == -1);
 }
+
+TEST_CASE("a change hook may not change its own triangulation: refused, naming the rule", "[insert][remove][hook]") {
+  // The hook reports a change still being made: inserting, removing,
+  // clearing, replacing the hook (the running std::function) or moving the
+  // triangulation from it would pull the ground from under that call.
+  pdt::Triangulation t;
+  for (const Point3& p : random_points(50, 3)) t.insert(p);
+  std::vector<std::string> refusals;
+  const pdt::VertexId some = t.vertices().front();
+  t.set_change_hook([&](const pdt::Changes&) {
+    auto refused = [&](auto&& call) {
+      try {
+        call();
+        refusals.push_back("accepted");
+      } catch (const pdt::Error& e) {
+        refusals.push_back(e.code() == pdt::ErrorCode::invalid_argument ? e.what() : "wrong code");
+      }
+    };
+    refused([&] { t.insert({0.5, 0.5, 0.5}); });
+    refused([&] { t.remove(some); });
+    refused([&] { t.clear(); });
+    refused([&] { t.set_change_hook({}); });
+    refused([&] { pdt::Triangulation moved(std::move(t)); });
+    refused([&] {
+      pdt::Triangulation other;
+      t = std::move(other);
+    });
+  });
+  t.insert({0.25, 0.75, 0.5});
+  REQUIRE(refusals.size() == 6);
+  for (const std::string& why : refusals) {
+    INFO(why);
+    CHECK(why.find("from the triangulation's own change hook") != std::string::npos);
+  }
+  // Nothing changed but the insertion that ran the hook; the hook is kept.
+  std::string why;
+  REQUIRE(t.validate(&why));
+  REQUIRE(t.number_of_vertices() == 51);
+  REQUIRE(t.is_vertex(some));
+  t.set_change_hook({});  // outside the hook: fine
+  t.insert({0.75, 0.25, 0.5});
+  REQUIRE(refusals.size() == 6);
+}

@@ -211,6 +211,9 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
     while (blocks < detail::Partition::max_blocks_per_axis && blocks * blocks * blocks < 64 * workers) ++blocks;
   // One engine at a time: attach (a refusal changes nothing), then build.
   Triangulation::Impl& impl = detail::impl_of(t);
+  if (impl.engine.load(std::memory_order_acquire) == nullptr && impl.seq->in_hook)
+    bad("an Engine cannot be attached from the triangulation's own change hook, while the change it reports is "
+        "being made; attach it after that call returns");
   const void* none = nullptr;
   if (!impl.engine.compare_exchange_strong(none, this))
     bad("another Engine is attached to this triangulation: one engine at a time may drive a triangulation; destroy "

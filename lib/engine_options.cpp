@@ -8,6 +8,7 @@
 #include <string>
 #include <type_traits>
 
+#include "io_util.hpp"
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 
@@ -45,7 +46,8 @@ bool env_number(const char* name, T& field, double most) {
   if (!s || !*s) return false;
   constexpr bool whole = std::is_integral_v<T>;
   if constexpr (whole) most = std::min(most, static_cast<double>(std::numeric_limits<T>::max()));
-  const double v = plain_decimal(s, !whole) ? std::strtod(s, nullptr) : -1;
+  double v = -1;  // parse_double: from_chars, whatever the locale's decimal point
+  if (plain_decimal(s, !whole) && detail::parse_double(s, v) != detail::NumStatus::ok) v = -1;
   if (!(v >= 0 && v <= most)) {
     char range[96];
     std::snprintf(range, sizeof range, whole ? "a whole number from 0 to %.0f" : "a number from 0 to %g", most);

@@ -25,16 +25,14 @@ void EngineState::spawn(std::coroutine_handle<> h) {
     }
     running_engine = outer;
   };
-  // From one of this engine's own tasks (in its arena): spawned on this
-  // thread's deque. From anywhere else (a submitter's thread, another
-  // arena): enqueued, which never waits. arena->execute() would make the
-  // submitter wait for a free slot in the arena, that is for a worker thread,
-  // so a submitter holding a lock that a hook or callback takes deadlocked.
-  // The deferred task counts in `tasks` from now on, so drain() waits for it.
-  if (running_engine == this)
-    tasks.run(std::move(task));
-  else
-    arena->enqueue(tasks.defer(std::move(task)));
+  // Enqueued into the engine's arena, from any thread: it never waits (with
+  // arena->execute() a submitter waited for a free slot in a full arena, that
+  // is for a worker thread, so one holding a lock that a hook or callback
+  // takes deadlocked), and it lands in the engine's arena even from one of
+  // its own tasks that entered another arena (a callback's execute()), where
+  // tasks.run() would spawn it. The deferred task counts in `tasks` from now
+  // on, so drain() waits for it.
+  arena->enqueue(tasks.defer(std::move(task)));
 }
 
 // ---------------------------------------------------------------------------
@@ -316,7 +314,7 @@ bool EngineState::maybe_recut(Worker& w) {
     // NonEmptyBlocks' invariant: every block holding work is marked (a
     // submitter between its count and its mark finishes at once).
     for (std::uint32_t i = 0; i < count; ++i) {
-      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);  // a descheduled submitter
       while (blocks[i].queued.load() != 0 && !nonempty.marked(i) && std::chrono::steady_clock::now() < until)
         std::this_thread::yield();
       assert(blocks[i].queued.load() == 0 || nonempty.marked(i));

@@ -14,6 +14,11 @@
 // marker finds the bit cleared and sets it. A set bit on an empty block is
 // allowed (a scanner clears it when it passes). Checked with the world
 // stopped in debug builds (EngineState::maybe_recut).
+// A third party may see the bit clear for a moment while work is queued
+// (between a clearer's clear and its set-back). That is safe because the
+// only clearer is a running worker in claim() (keep it so): after setting
+// the bit back it scans again before it can go idle or sleep (IdleAwait's
+// last look at work_for), so the work is never left with nobody to see it.
 #include <atomic>
 #include <bit>
 #include <cstdint>

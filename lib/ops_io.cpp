@@ -9,6 +9,8 @@
 //   - 'r k' only for an insertion k made earlier and not yet undone.
 // write_ops checks the same invariants (invalid_argument otherwise), so it
 // never writes a file read_ops would reject.
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -375,18 +377,20 @@ void write_ops(const std::string& path, const OpStream& stream) {
 }
 
 // ---- OpWriter ---------------------------------------------------------------
-// Invariant: `live` holds exactly the insertions written and not undone, so
-// every operation written passes read_ops's checks; `out` is null once closed
-// (or failed), and then only destruction is allowed.
+// Invariant: bit k of `live` is set exactly for the insertions written and
+// not undone (k < made), so every operation written passes read_ops's
+// checks; the state is updated before the bytes are put, and `out` is null
+// once closed (or after a failed write), when only destruction is allowed.
 struct OpWriter::State {
   std::string path;
   std::optional<Box> box;
   bool binary = false;
   std::unique_ptr<detail::OutputFile> out;
-  LiveSet live;
-  std::uint64_t written = 0;
+  std::vector<std::uint64_t> live;  // a bit per insertion written (dense indices: no allocation per one)
+  std::uint64_t made = 0, written = 0;
   std::string line;
 
+  bool is_live(std::uint64_t k) const { return k < made && (live[k >> 6] >> (k & 63)) & 1; }
   detail::OutputFile& open(const char* call) {
     if (!out)
       throw Error(ErrorCode::invalid_argument,
@@ -405,6 +409,11 @@ struct OpWriter::State {
   }
 };
 
+OpWriter::State& OpWriter::state_of(const std::unique_ptr<State>& s) {
+  if (!s) throw Error(ErrorCode::invalid_argument, "OpWriter: used after it was moved from");
+  return *s;
+}
+
 OpWriter::OpWriter(const std::string& path, const std::optional<Box>& box) : state_(std::make_unique<State>()) {
   State& st = *state_;
   st.path = path;
@@ -413,11 +422,17 @@ OpWriter::OpWriter(const std::string& path, const std::optional<Box>& box) : sta
   if (box)
     if (const char* why = box_problem(*box))
       throw Error(ErrorCode::invalid_argument, "OpWriter: the box " + std::string(why));
+  auto cannot_seek = [&] {
+    return Error(ErrorCode::invalid_argument,
+                 "OpWriter: '" + path + "' cannot be sought in, and the binary form (.opsb) patches its count into "
+                 "its header when closed; write the text form (.ops) to a pipe or device");
+  };
+  // Before opening: opening a FIFO for writing waits for a reader.
+  struct stat target;
+  if (st.binary && ::stat(path.c_str(), &target) == 0 && !S_ISREG(target.st_mode) && !S_ISDIR(target.st_mode))
+    throw cannot_seek();
   st.out = std::make_unique<detail::OutputFile>(path);
-  if (st.binary && !st.out->seekable())
-    throw Error(ErrorCode::invalid_argument,
-                "OpWriter: '" + path + "' cannot be sought in, and the binary form (.opsb) patches its count into "
-                "its header when closed; write the text form (.ops) to a pipe or device");
+  if (st.binary && !st.out->seekable()) throw cannot_seek();
   st.line.reserve(128);
   st.guarded([&] {
     if (st.binary) {
@@ -434,7 +449,7 @@ OpWriter::OpWriter(OpWriter&&) noexcept = default;
 OpWriter& OpWriter::operator=(OpWriter&&) noexcept = default;
 
 void OpWriter::write(const Operation& op) {
-  State& st = *state_;
+  State& st = state_of(state_);
   detail::OutputFile& out = st.open("write");
   if (op.kind == Operation::Kind::insert) {
     if (!is_finite(op.point))
@@ -442,27 +457,25 @@ void OpWriter::write(const Operation& op) {
     if (st.box && !st.box->contains(op.point))
       throw Error(ErrorCode::invalid_argument,
                   "OpWriter: insertion of " + detail::format_point(op.point) + ", outside the box");
+    if ((st.made >> 6) >= st.live.size()) st.live.push_back(0);  // may throw bad_alloc: nothing changed yet
+    st.live[st.made >> 6] |= std::uint64_t{1} << (st.made & 63);
+    ++st.made;
   } else if (op.kind == Operation::Kind::remove) {
-    if (op.target >= st.live.made)
-      throw Error(ErrorCode::invalid_argument, "OpWriter: remove " + std::to_string(op.target) +
-                                                   " names an insertion that has not been written yet");
-    if (!st.live.live.count(op.target))
+    if (!st.is_live(op.target))
       throw Error(ErrorCode::invalid_argument,
-                  "OpWriter: remove " + std::to_string(op.target) + " names an insertion that was already undone");
+                  "OpWriter: remove " + std::to_string(op.target) + " names an insertion that " +
+                      (op.target >= st.made ? "has not been written yet" : "was already undone"));
+    st.live[op.target >> 6] &= ~(std::uint64_t{1} << (op.target & 63));
   } else {
     throw Error(ErrorCode::invalid_argument, "OpWriter: an operation of unknown kind");
   }
-  st.guarded([&] {
+  ++st.written;
+  st.guarded([&] {  // a failure here closes the writer: the state above no longer matters
     if (st.binary)
       put_binary_op(out, op);
     else
       put_text_op(out, op, st.line);
   });
-  if (op.kind == Operation::Kind::insert)
-    st.live.insert();
-  else
-    st.live.remove(op.target);
-  ++st.written;
 }
 
 std::uint64_t OpWriter::insert(const Point3& p) {
@@ -470,7 +483,7 @@ std::uint64_t OpWriter::insert(const Point3& p) {
   op.kind = Operation::Kind::insert;
   op.point = p;
   write(op);
-  return state_->live.made - 1;
+  return state_->made - 1;
 }
 
 void OpWriter::remove(std::uint64_t k) {
@@ -480,12 +493,12 @@ void OpWriter::remove(std::uint64_t k) {
   write(op);
 }
 
-std::uint64_t OpWriter::operations_written() const { return state_->written; }
-std::uint64_t OpWriter::insertions_written() const { return state_->live.made; }
-const std::string& OpWriter::path() const { return state_->path; }
+std::uint64_t OpWriter::operations_written() const { return state_of(state_).written; }
+std::uint64_t OpWriter::insertions_written() const { return state_of(state_).made; }
+const std::string& OpWriter::path() const { return state_of(state_).path; }
 
 void OpWriter::close() {
-  State& st = *state_;
+  State& st = state_of(state_);
   detail::OutputFile& out = st.open("close");
   st.guarded([&] {
     if (st.binary) {

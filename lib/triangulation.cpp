@@ -23,12 +23,16 @@ using detail::to_kpoint;
 // its own change hook reports a change still being made (changing it there,
 // or replacing the running hook, would pull the ground from under that call).
 void require_detached(const Triangulation::Impl& m, const char* what) {
-  if (m.seq && m.seq->in_hook)
-    throw Error(ErrorCode::invalid_argument,
-                std::string("Triangulation::") + what +
-                    " from the triangulation's own change hook: the hook reports a change still being made; note "
-                    "what to do and do it after the call that made the change returns");
-  if (m.engine.load(std::memory_order_acquire) == nullptr) return;
+  if (m.engine.load(std::memory_order_acquire) == nullptr) {
+    // Detached: the sequential context is this thread's alone (an engine's
+    // global steps use it too, so with one attached in_hook is not read).
+    if (m.seq && m.seq->in_hook)
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("Triangulation::") + what +
+                      " from the triangulation's own change hook: the hook reports a change still being made; note "
+                      "what to do and do it after the call that made the change returns");
+    return;
+  }
   throw Error(ErrorCode::invalid_argument,
               std::string("Triangulation::") + what +
                   " while an Engine is attached: an engine owns its triangulation from construction to "

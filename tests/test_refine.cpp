@@ -143,6 +143,25 @@ TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds
   }
 }
 
+TEST_CASE("refine: the pruned surface sampling gives exactly the brute-force scan's samples", "[refine]") {
+  // Without a Lipschitz or outside bound surface_samples visits every cell:
+  // the pruned scan must give the same points in the same order.
+  for (const char* name : {"sphere", "torus", "gyroid"})
+    for (double size : {0.3, 0.11})
+      for (std::uint64_t seed : {1u, 7u}) {
+        INFO(name << " size " << size << " seed " << seed);
+        const pdt_refine::Domain d = pdt_refine::domain_by_name(name);
+        pdt_refine::Domain brute = d;
+        brute.lipschitz = 0;
+        brute.outside_bound = nullptr;
+        const std::vector<Point3> pruned = pdt_refine::surface_samples(d, size, seed);
+        const std::vector<Point3> all = pdt_refine::surface_samples(brute, size, seed);
+        REQUIRE(pruned.size() > 10);
+        REQUIRE(pruned.size() == all.size());
+        for (std::size_t i = 0; i < all.size(); ++i) REQUIRE(same_bits(pruned[i], all[i]));
+      }
+}
+
 TEST_CASE("refine: every domain, a .vtu with the quality fields", "[refine][cli]") {
   if (!have_tool()) return;
   for (const char* domain : {"sphere", "gyroid"}) {

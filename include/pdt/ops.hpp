@@ -59,6 +59,7 @@ class OpReader {
 
  private:
   struct State;
+  static State& state_of(const std::unique_ptr<State>& s);  // refuses a moved-from writer
   std::unique_ptr<State> state_;
 };
 
@@ -113,6 +114,7 @@ class OpWriter {
 
  private:
   struct State;
+  static State& state_of(const std::unique_ptr<State>& s);  // refuses a moved-from writer
   std::unique_ptr<State> state_;
 };
 

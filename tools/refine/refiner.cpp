@@ -411,9 +411,8 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
                   o.size, o.domain.name.c_str(), extent);
     bad(why);
   }
-  if (too_many) {
+  if (too_many) {  // refused: the trace is discarded (an older file of its name stays)
     st.budget_hit = st.samples_over_budget = true;
-    trace.close();
     st.seconds = seconds();
     return st;
   }
@@ -462,7 +461,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
     r.fill(st);
     st.engine = e.stats();
   }
-  trace.close();
+  if (!st.samples_over_budget) trace.close();  // refused before anything ran: discarded
   st.seconds = seconds();
   return st;
 }

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "mix64.hpp"
+#include "open_addressing.hpp"
 #include "predicates.hpp"
 #include "stable_array.hpp"
 #include "storage.hpp"
@@ -51,17 +52,7 @@ class FlatIndex {
   void erase(VertexId v, const Vertices& verts) {
     std::size_t s = home(verts[v].p);
     while (slots_[s] != v) s = (s + 1) & mask();
-    // Backward shift: move later entries of the cluster into the hole when
-    // their home does not lie (cyclically) between the hole and them.
-    std::size_t hole = s;
-    for (std::size_t t = (s + 1) & mask(); slots_[t] != no_vertex; t = (t + 1) & mask()) {
-      const std::size_t h = home(verts[slots_[t]].p);
-      const bool stays = hole <= t ? (hole < h && h <= t) : (hole < h || h <= t);
-      if (stays) continue;
-      slots_[hole] = slots_[t];
-      hole = t;
-    }
-    slots_[hole] = no_vertex;
+    erase_by_backward_shift(slots_, s, no_vertex, [&](VertexId w) { return home(verts[w].p); });
     --count_;
   }
   void clear() {

@@ -23,14 +23,14 @@
 
 namespace pdt {
 
-namespace {
-
-// TetGen file base name: the path without a .node/.ele extension.
-std::string tetgen_base(const std::string& path) {
+TetgenFiles tetgen_files(const std::string& path) {
+  std::string base = path;
   for (const char* ext : {".node", ".ele"})
-    if (detail::ends_with_nocase(path, ext)) return path.substr(0, path.size() - std::strlen(ext));
-  return path;
+    if (detail::ends_with_nocase(path, ext)) base = path.substr(0, path.size() - std::strlen(ext));
+  return {base + ".node", base + ".ele"};
 }
+
+namespace {
 
 void check_indices(const Mesh& mesh, const char* who) {
   const std::size_t n = mesh.points.size();
@@ -75,7 +75,7 @@ Mesh extract_mesh(const Triangulation& t) {
   return m;
 }
 
-// Writes base.node and base.ele a line at a time: each_point(emit) calls
+// Writes tetgen_files(path) a line at a time: each_point(emit) calls
 // emit(p) for the points in their order, each_tet(emit) emit(a, b, c, d) with
 // 0-based point numbers. Both files complete before either is renamed, so a
 // failure leaves neither.
@@ -85,10 +85,11 @@ Mesh extract_mesh(const Triangulation& t) {
 //          "<index> a b c d", positively oriented as given.
 namespace {
 template <class EachPoint, class EachTet>
-void write_tetgen_files(const std::string& base, std::size_t points, EachPoint each_point, std::size_t tets,
+void write_tetgen_files(const std::string& path, std::size_t points, EachPoint each_point, std::size_t tets,
                         EachTet each_tet) {
-  detail::OutputFile node(base + ".node");
-  detail::OutputFile ele(base + ".ele");
+  const TetgenFiles files = tetgen_files(path);
+  detail::OutputFile node(files.node);
+  detail::OutputFile ele(files.ele);
   std::string line;
   line.reserve(128);
   detail::append_uint(line, points);
@@ -130,7 +131,7 @@ void write_tetgen_files(const std::string& base, std::size_t points, EachPoint e
 void write_tetgen(const std::string& path, const Mesh& mesh) {
   check_indices(mesh, "write_tetgen");
   write_tetgen_files(
-      tetgen_base(path), mesh.points.size(),
+      path, mesh.points.size(),
       [&](auto emit) {
         for (const Point3& p : mesh.points) emit(p);
       },
@@ -301,7 +302,7 @@ void write_tetgen(const std::string& path, const Triangulation& t) {
   // Straight from the triangulation: no copy of the mesh.
   std::vector<std::uint32_t> node_of(t.vertex_id_bound(), 0xFFFFFFFFu);
   write_tetgen_files(
-      tetgen_base(path), t.number_of_vertices(),
+      path, t.number_of_vertices(),
       [&](auto emit) {
         std::uint32_t next = 0;
         for (VertexId v = 1; v < t.vertex_id_bound(); ++v) {
@@ -320,15 +321,15 @@ void write_tetgen(const std::string& path, const Triangulation& t) {
 }
 
 Mesh read_tetgen(const std::string& path) {
-  const std::string base = tetgen_base(path);
+  const TetgenFiles files = tetgen_files(path);
   Mesh m;
   std::uint64_t first = 0;
   {
-    detail::InputFile nf(base + ".node");
+    detail::InputFile nf(files.node);
     m.points = detail::read_node_section(nf, &first);
     detail::require_end(nf, "the " + std::to_string(m.points.size()) + " nodes its header announces");
   }
-  detail::InputFile f(base + ".ele");
+  detail::InputFile f(files.ele);
   std::string_view fields[16];
   std::string_view line;
   auto next = [&](std::size_t& n) {

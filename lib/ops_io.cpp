@@ -16,10 +16,10 @@
 #include <cmath>
 #include <cstring>
 #include <string>
-#include <unordered_set>
 #include <vector>
 
 #include "io_util.hpp"
+#include "live_insertions.hpp"
 #include "pdt/error.hpp"
 #include "pdt/ops.hpp"
 #include "point_checks.hpp"
@@ -45,19 +45,13 @@ constexpr const char* kExpectedForms = "expected 'i x y z', 'r k' or 'box x0 y0 
 using detail::box_problem;
 using detail::is_finite;
 
-// Tracks which insertions are live, to validate 'r k': a set of the live
-// indices, so its size follows the live insertions, not the stream's length.
-struct LiveSet {
-  std::unordered_set<std::uint64_t> live;
-  std::uint64_t made = 0;  // insertions so far
-  void insert() { live.insert(made++); }
-  // nullptr if 'r k' is fine here (and records it), else why not.
-  const char* remove(std::uint64_t k) {
-    if (k >= made) return "names an insertion that has not been made yet";
-    if (live.erase(k) == 0) return "names an insertion that was already undone";
-    return nullptr;
-  }
-};
+using LiveSet = detail::LiveInsertions;
+
+// Why 'r k' may not come here, in a reader's words.
+const char* undo_problem(LiveSet::Undo u) {
+  return u == LiveSet::Undo::not_made_yet ? "names an insertion that has not been made yet"
+                                          : "names an insertion that was already undone";
+}
 
 std::uint64_t load_u64(const unsigned char* p) {
   std::uint64_t v = 0;
@@ -131,9 +125,9 @@ struct OpReader::State {
           f.fail("'r' index " + detail::quote(fields[1]) + " " +
                  (s == NumStatus::out_of_range ? "is too large" : "is not a non-negative integer") +
                  "; expected 'r k' with k the number (from 0) of an earlier 'i' line");
-        const std::uint64_t made = live.made;
-        if (const char* why = live.remove(k))
-          f.fail("'r " + std::to_string(k) + "' " + why + " (" + std::to_string(made) +
+        const std::uint64_t made = live.made();
+        if (const LiveSet::Undo u = live.remove(k); u != LiveSet::Undo::done)
+          f.fail("'r " + std::to_string(k) + "' " + undo_problem(u) + " (" + std::to_string(made) +
                  " insertions so far); expected the index of an earlier, not yet undone 'i' line");
         op = Operation{};
         op.kind = Operation::Kind::remove;
@@ -204,9 +198,9 @@ struct OpReader::State {
       if (f.read_bytes(rec, 8) != 8) fail_bin(f, where(), "file ends inside a removal record (kind + u64)");
       op.kind = Operation::Kind::remove;
       op.target = load_u64(rec);
-      const std::uint64_t made = live.made;
-      if (const char* why = live.remove(op.target))
-        fail_bin(f, where(), "removal of insertion " + std::to_string(op.target) + " " + why + " (" +
+      const std::uint64_t made = live.made();
+      if (const LiveSet::Undo u = live.remove(op.target); u != LiveSet::Undo::done)
+        fail_bin(f, where(), "removal of insertion " + std::to_string(op.target) + " " + undo_problem(u) + " (" +
                                  std::to_string(made) + " insertions so far)");
     } else {
       fail_bin(f, where(), "unknown operation kind " + std::to_string(kind) + "; expected 0 (insert) or 1 (remove)");
@@ -272,8 +266,8 @@ void validate_for_write(const OpStream& s) {
         bad("operation " + std::to_string(i) + " inserts " + detail::format_point(op.point) + ", outside the box");
       live.insert();
     } else if (op.kind == Operation::Kind::remove) {
-      if (const char* why = live.remove(op.target))
-        bad("operation " + std::to_string(i) + " (remove " + std::to_string(op.target) + ") " + why);
+      if (const LiveSet::Undo u = live.remove(op.target); u != LiveSet::Undo::done)
+        bad("operation " + std::to_string(i) + " (remove " + std::to_string(op.target) + ") " + undo_problem(u));
     } else {
       bad("operation " + std::to_string(i) + " has an unknown kind");
     }
@@ -377,20 +371,18 @@ void write_ops(const std::string& path, const OpStream& stream) {
 }
 
 // ---- OpWriter ---------------------------------------------------------------
-// Invariant: bit k of `live` is set exactly for the insertions written and
-// not undone (k < made), so every operation written passes read_ops's
-// checks; the state is updated before the bytes are put, and `out` is null
+// Invariant: `live` holds exactly the insertions written and not undone, so
+// every operation written passes read_ops's checks; the state is updated before the bytes are put, and `out` is null
 // once closed (or after a failed write), when only destruction is allowed.
 struct OpWriter::State {
   std::string path;
   std::optional<Box> box;
   bool binary = false;
   std::unique_ptr<detail::OutputFile> out;
-  std::vector<std::uint64_t> live;  // a bit per insertion written (dense indices: no allocation per one)
-  std::uint64_t made = 0, written = 0;
+  LiveSet live;  // insertion k of the stream is the k-th written
+  std::uint64_t written = 0;
   std::string line;
 
-  bool is_live(std::uint64_t k) const { return k < made && (live[k >> 6] >> (k & 63)) & 1; }
   detail::OutputFile& open(const char* call) {
     if (!out)
       throw Error(ErrorCode::invalid_argument,
@@ -457,15 +449,12 @@ void OpWriter::write(const Operation& op) {
     if (st.box && !st.box->contains(op.point))
       throw Error(ErrorCode::invalid_argument,
                   "OpWriter: insertion of " + detail::format_point(op.point) + ", outside the box");
-    if ((st.made >> 6) >= st.live.size()) st.live.push_back(0);  // may throw bad_alloc: nothing changed yet
-    st.live[st.made >> 6] |= std::uint64_t{1} << (st.made & 63);
-    ++st.made;
+    st.live.insert();  // may throw bad_alloc: nothing changed yet
   } else if (op.kind == Operation::Kind::remove) {
-    if (!st.is_live(op.target))
+    if (const LiveSet::Undo u = st.live.remove(op.target); u != LiveSet::Undo::done)
       throw Error(ErrorCode::invalid_argument,
                   "OpWriter: remove " + std::to_string(op.target) + " names an insertion that " +
-                      (op.target >= st.made ? "has not been written yet" : "was already undone"));
-    st.live[op.target >> 6] &= ~(std::uint64_t{1} << (op.target & 63));
+                      (u == LiveSet::Undo::not_made_yet ? "has not been written yet" : "was already undone"));
   } else {
     throw Error(ErrorCode::invalid_argument, "OpWriter: an operation of unknown kind");
   }
@@ -483,7 +472,7 @@ std::uint64_t OpWriter::insert(const Point3& p) {
   op.kind = Operation::Kind::insert;
   op.point = p;
   write(op);
-  return state_->made - 1;
+  return state_->live.made() - 1;
 }
 
 void OpWriter::remove(std::uint64_t k) {
@@ -494,7 +483,7 @@ void OpWriter::remove(std::uint64_t k) {
 }
 
 std::uint64_t OpWriter::operations_written() const { return state_of(state_).written; }
-std::uint64_t OpWriter::insertions_written() const { return state_of(state_).made; }
+std::uint64_t OpWriter::insertions_written() const { return state_of(state_).live.made(); }
 const std::string& OpWriter::path() const { return state_of(state_).path; }
 
 void OpWriter::close() {

@@ -347,6 +347,9 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
   m.points = {{0.1, 0.2, 0.3}, {1e-310, 1, 0}, {0, 1.0 / 3, 1}, {1, 1, 1}, {-2, 3e300, 7}};
   m.tets = {{0, 1, 2, 3}, {1, 2, 3, 4}};
   for (const std::string name : {"mesh", "mesh.node", "mesh.ele"}) {
+    const pdt::TetgenFiles files = pdt::tetgen_files(d.file(name));
+    CHECK(files.node == d.file("mesh.node"));
+    CHECK(files.ele == d.file("mesh.ele"));
     pdt::write_tetgen(d.file(name), m);
     const std::string node = pdt_test::read_file(d.file("mesh.node"));
     const std::string ele = pdt_test::read_file(d.file("mesh.ele"));
@@ -358,6 +361,10 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
     CHECK(r.tets == m.tets);
     CHECK(d.entries() == 2);
   }
+  // Any case of the extension is replaced; any other name gets both appended.
+  CHECK(pdt::tetgen_files("a/B.NODE").ele == "a/B.ele");
+  CHECK(pdt::tetgen_files("a/B.Ele").node == "a/B.node");
+  CHECK(pdt::tetgen_files("m.vtu").node == "m.vtu.node");
   // 1-based TetGen files (TetGen's default numbering) read back 0-based.
   write_file(d.file("one.node"), "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n");
   write_file(d.file("one.ele"), "# comment\n1 4 1\n1 1 2 3 4 5.0\n");

@@ -14,11 +14,14 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <random>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "common/io_test_util.hpp"
 #include "io_util.hpp"
+#include "live_insertions.hpp"  // the readers' and the writer's live set, tested alone
 #include "pdt/ops.hpp"
 
 using pdt_test::catch_error;
@@ -508,4 +511,58 @@ TEST_CASE("a line over 1 MiB is refused, as the message says, wherever the buffe
   TempDir d;
   write_file(d.file("ok.ops"), "# " + std::string((std::size_t{1} << 20) - 8, 'x') + "\ni 1 1 1\n");
   CHECK(pdt::read_ops(d.file("ok.ops")).ops.size() == 1);
+}
+
+TEST_CASE("LiveInsertions agrees with a reference set and stays as small as the live insertions", "[io]") {
+  using Undo = pdt::detail::LiveInsertions::Undo;
+  pdt::detail::LiveInsertions live;
+  std::set<std::uint64_t> ref;
+  std::mt19937_64 rng(7);
+  CHECK(live.remove(0) == Undo::not_made_yet);
+  for (int step = 0; step < 400000; ++step) {
+    const auto dice = rng() % 100;
+    // Few live at a time (a refiner's stream: most insertions are undone
+    // soon), with bursts that grow and shrink the set.
+    const bool grow_phase = (step / 50000) % 2 == 0;
+    if (ref.empty() || dice < (grow_phase ? 60u : 40u)) {
+      ref.insert(live.made());
+      live.insert();
+    } else {
+      // A live one (often the newest), an undone one, or one not made yet.
+      const auto pick = rng() % 10;
+      std::uint64_t k;
+      if (pick < 7) {
+        auto it = ref.lower_bound(rng() % live.made());
+        if (it == ref.end()) it = std::prev(ref.end());
+        k = *it;
+      } else if (pick < 9) {
+        k = rng() % live.made();
+      } else {
+        k = live.made() + rng() % 3;
+      }
+      const Undo want = k >= live.made() ? Undo::not_made_yet : ref.count(k) ? Undo::done : Undo::already_undone;
+      REQUIRE(live.remove(k) == want);
+      if (want == Undo::done) ref.erase(k);
+    }
+    REQUIRE(live.live() == ref.size());
+  }
+  for (std::uint64_t k = 0; k < live.made(); ++k) REQUIRE(live.is_live(k) == (ref.count(k) == 1));
+  // Undo everything: nothing is live, and nothing can be undone twice.
+  for (std::uint64_t k : ref) REQUIRE(live.remove(k) == Undo::done);
+  CHECK(live.live() == 0);
+  CHECK(live.remove(0) == Undo::already_undone);
+}
+
+TEST_CASE("reading an endless refiner-like stream keeps memory to the live insertions", "[io]") {
+  // 2M insertions, each undone right after the next one: at most 2 live. The
+  // set of live indices must not grow with the stream (a bit or a node per
+  // insertion made would be 250 KB or 64 MB here).
+  pdt::detail::LiveInsertions live;
+  for (std::uint64_t k = 0; k < 2000000; ++k) {
+    live.insert();
+    if (k > 0) REQUIRE(live.remove(k - 1) == pdt::detail::LiveInsertions::Undo::done);
+  }
+  CHECK(live.live() == 1);
+  CHECK(live.made() == 2000000);
+  CHECK(live.table_bytes() <= 16 * sizeof(std::uint64_t));
 }

@@ -68,6 +68,7 @@ TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds
     REQUIRE(r.code == 0);
     CHECK(r.out.find("validate         ok") != std::string::npos);
     CHECK(r.out.find("bounds           met") != std::string::npos);
+    CHECK(r.out.find("wrote            " + mesh + " and " + d.file("torus.ele")) != std::string::npos);
     const pdt::Mesh m = pdt::read_tetgen(mesh);
     REQUIRE(m.points.size() > 500);
 

@@ -210,11 +210,14 @@ int cmd_refine(Args args) {
     if (!ok) status = 1;
   }
   if (out) {
-    if (ends_with_nocase(*out, ".vtu"))
+    if (ends_with_nocase(*out, ".vtu")) {
       write_inside_vtu(*out, t, o.domain);
-    else
+      row("wrote", *out);
+    } else {
       pdt::write_tetgen(*out, t);
-    row("wrote", *out);
+      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
+      row("wrote", files.node + " and " + files.ele);
+    }
   }
   if (trace) row("trace", *trace + " (pdt run " + *trace + " --threads N replays it)");
   std::fflush(stdout);

@@ -483,12 +483,12 @@ int cmd_run(Args args) {
     const pdt::Mesh m = pdt::extract_mesh(t);
     if (out_kind == OutKind::tetgen) pdt::write_tetgen(*out, m);
     else pdt::write_vtu(*out, m, vtu_ascii ? pdt::VtuEncoding::ascii : pdt::VtuEncoding::zlib);
-    // write_tetgen writes BASE.node and BASE.ele, whichever of the two (in
-    // any case) --out named: say which files those are.
+    // write_tetgen writes a .node and a .ele, whichever of the two (in any
+    // case) --out named: say which files those are.
     std::string written = *out;
     if (out_kind == OutKind::tetgen) {
-      const std::string base = out->substr(0, out->size() - (ends_with_nocase(*out, ".node") ? 5 : 4));
-      written = base + ".node and " + base + ".ele";
+      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
+      written = files.node + " and " + files.ele;
     }
     row("wrote", written + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
   }

@@ -51,6 +51,13 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding =
                std::span<const CellField> cell_fields = {});
 Mesh read_tetgen(const std::string& path);  // reads .node and the .ele beside it
 
+// The two files write_tetgen writes and read_tetgen reads for `path`: a
+// .node or .ele extension (any case) is replaced, else both are appended.
+struct TetgenFiles {
+  std::string node, ele;
+};
+TetgenFiles tetgen_files(const std::string& path);
+
 struct MeshCheck {
   bool valid = false;         // a Delaunay tetrahedralization of its points
   std::string message;        // what failed, or a summary

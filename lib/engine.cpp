@@ -476,20 +476,19 @@ void Engine::remove_insertions(std::span<const Ticket> batch, Callback done) {
   if (batch.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument, "remove_insertions: " + std::to_string(batch.size()) + " tickets; at most 2^32 - 2");
   if (batch.empty()) return;
-  {
-    std::vector<Ticket> sorted(batch.begin(), batch.end());
-    std::sort(sorted.begin(), sorted.end());
-    if (auto twice = std::adjacent_find(sorted.begin(), sorted.end()); twice != sorted.end())
-      throw Error(ErrorCode::unknown_vertex, "remove_insertions: ticket " + std::to_string(*twice) +
-                                                 " appears twice in the batch; each insertion is undone once");
-  }
-  // All or nothing: claim every ticket, and give the claims back on the first bad one.
+  // All or nothing: claim every ticket, and give the claims back on the first
+  // bad one. A ticket given twice fails its second claim (its first made it
+  // undone): named as what it is, found only then.
   std::vector<detail::TicketView> views(batch.size());
   for (std::size_t i = 0; i < batch.size(); ++i) {
     try {
       views[i] = e.tickets.claim_undo(batch[i], e.impl.verts);
     } catch (...) {
       for (std::size_t j = 0; j < i; ++j) e.tickets.unclaim_undo(batch[j]);
+      const auto before = batch.begin() + static_cast<std::ptrdiff_t>(i);
+      if (std::find(batch.begin(), before, batch[i]) != before)
+        throw Error(ErrorCode::unknown_vertex, "remove_insertions: ticket " + std::to_string(batch[i]) +
+                                                   " appears twice in the batch; each insertion is undone once");
       throw;
     }
   }

@@ -262,8 +262,11 @@ Block* EngineState::claim(Worker& w) {
 }
 
 bool EngineState::work_for(const Worker& w) const {
-  const std::uint32_t count = partition.blocks();
-  for (std::uint32_t i = nonempty.next(0, count); i < count; i = nonempty.next(i + 1, count))
+  // With stealing off, w serves its home alone (blocks[i].home == w exactly
+  // for i in its home run: homes move only in a recut, which needs stealing).
+  const std::uint32_t first = opts.stealing ? 0 : partition.home_first(w.index);
+  const std::uint32_t end = opts.stealing ? partition.blocks() : partition.home_first(w.index + 1);
+  for (std::uint32_t i = nonempty.next(first, end); i < end; i = nonempty.next(i + 1, end))
     if (may_serve(w, blocks[i])) return true;
   return false;
 }

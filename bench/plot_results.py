@@ -1,15 +1,17 @@
 #!/usr/bin/python3
 # SPDX-License-Identifier: MIT
-"""Draws the benches' CSV files (bench_parallel --csv) as PNG plots.
+"""Draws the benches' CSV files (bench_parallel --csv, bench_peers --csv) as PNG plots.
 
-  /usr/bin/python3 bench/plot_results.py bench/results/parallel-1M-16cores.csv   -> ...-16cores.png
-  /usr/bin/python3 bench/plot_results.py bench/results/skewed-300k-16cores.csv   -> ...-16cores.png
+  /usr/bin/python3 bench/plot_results.py bench/results/*.csv        -> a .png beside each
 
 A 'main' table gives one panel per distribution: speedup over pdt with 1 worker
 (insertions and removals, one operation at a time), CGAL parallel's speedup over
 its own 1-thread run, and the ideal line. A 'skewed' table gives one panel per
-stream: speedup with stealing on and off. Needs Debian's python3-matplotlib
-(scripts/install-deps.sh --extras). The PNG goes beside the CSV.
+stream: speedup with stealing on and off. An 'interleaved' table (insertions and
+removals mixed) gives pdt's speedup over its 1 worker and over CGAL sequential.
+A bench_peers table gives seconds per peer against threads, one panel per
+distribution. Needs Debian's python3-matplotlib (scripts/install-deps.sh
+--extras). The PNG goes beside the CSV; a file of any other kind is an error.
 """
 import csv
 import sys
@@ -19,6 +21,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import FormatStrFormatter  # noqa: E402
 
 
 def load(path):
@@ -108,6 +111,67 @@ def plot_skewed(rows, out, machine):
     fig.savefig(out, dpi=110)
 
 
+def plot_interleaved(rows, out, machine):
+    dists = []
+    for r in rows:
+        if r["experiment"] == "interleaved" and r["dist"] not in dists:
+            dists.append(r["dist"])
+    fig, axes = panel_axes(len(dists))
+    for ax, d in zip(axes, dists):
+        times = seconds_by(rows, experiment="interleaved", dist=d, impl="pdt", phase="mixed")
+        ts, sp = speedups(times)
+        if ts:
+            ax.plot(ts, sp, "o-", label="pdt, over its 1 worker")
+        cgal = seconds_by(rows, experiment="interleaved", dist=d, impl="cgal_seq", phase="mixed")
+        if 1 in cgal and times:
+            ts = list(times)
+            ax.plot(ts, [cgal[1] / times[t] for t in ts], "s--", label="pdt, over CGAL sequential")
+        points = next(r["points"] for r in rows if r["dist"] == d)
+        finish(ax, ts, f"{d}, {int(points):,} points, interleaved")
+    for ax in axes[len(dists):]:
+        ax.axis("off")
+    fig.suptitle(f"bench_parallel, interleaved ({machine})")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
+def plot_peers(rows, out, machine):
+    dists = []
+    for r in rows:
+        if r["dist"] not in dists:
+            dists.append(r["dist"])
+    fig, axes = panel_axes(len(dists))
+    styles = {"pdt_batch": "o", "pdt_engine": "o-", "cgal_batch": "s", "cgal_parallel": "s--", "hxt": "^:"}
+    for ax, d in zip(axes, dists):
+        impls = []
+        for r in rows:
+            if r["dist"] == d and r["impl"] not in impls:
+                impls.append(r["impl"])
+        threads = set()
+        for impl in impls:
+            pts = sorted((int(r["threads"]), float(r["seconds"])) for r in rows if r["dist"] == d and r["impl"] == impl)
+            threads.update(t for t, _ in pts)
+            ax.plot([t for t, _ in pts], [sec for _, sec in pts], styles.get(impl, "x-"), label=impl)
+        ts = sorted(threads)
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+        ax.set_xticks(ts)
+        ax.set_xticklabels([str(t) for t in ts])
+        ax.set_xlabel("threads")
+        ax.set_ylabel("seconds (lower is better)")
+        points = next(r["points"] for r in rows if r["dist"] == d)
+        ax.set_title(f"{d}, {int(points):,} points")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    for ax in axes[len(dists):]:
+        ax.axis("off")
+    fig.suptitle(f"bench_peers: batch triangulation time ({machine})")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
 def main():
     if len(sys.argv) < 2:
         sys.exit(__doc__)
@@ -117,6 +181,12 @@ def main():
             sys.exit(f"plot_results: {path} has no rows")
         machine = "16 cores" if "16cores" in path else "2 cores" if "2cores" in path else path
         out = path.rsplit(".", 1)[0] + ".png"
+        if "experiment" not in rows[0]:
+            if not {"dist", "impl", "threads", "seconds", "points"} <= rows[0].keys():
+                sys.exit(f"plot_results: {path}: neither a bench_parallel nor a bench_peers table")
+            plot_peers(rows, out, machine)
+            print(f"plot_results: {out}")
+            continue
         kinds = defaultdict(int)
         for r in rows:
             kinds[r["experiment"]] += 1
@@ -124,8 +194,10 @@ def main():
             plot_skewed(rows, out, machine)
         elif kinds.get("main"):
             plot_main(rows, out, machine)
+        elif kinds.get("interleaved"):
+            plot_interleaved(rows, out, machine)
         else:
-            sys.exit(f"plot_results: {path}: no 'main' or 'skewed' rows")
+            sys.exit(f"plot_results: {path}: no 'main', 'skewed' or 'interleaved' rows")
         print(f"plot_results: {out}")
 
 

@@ -195,7 +195,7 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
   if (!(options.contention_low >= 0 && options.contention_low <= options.contention_high &&
         options.contention_high <= 1))
     bad("contention thresholds must satisfy 0 <= contention_low <= contention_high <= 1");
-  if (options.workers == 0) options.workers = options.threads;  // the 0.1 name
+  if (options.workers == 0) options.workers = options.threads;  // the older name
   if (options.workers > EngineOptions::max_workers)
     bad("workers must be at most " + std::to_string(EngineOptions::max_workers));
   static_assert(EngineOptions::max_blocks_per_axis == detail::Partition::max_blocks_per_axis);

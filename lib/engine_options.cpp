@@ -63,10 +63,21 @@ bool env_number(const char* name, T& field, double most) {
 EngineOptions EngineOptions::from_environment(EngineOptions o) {
   constexpr double any = 1e12;  // no bound of its own: the field's type bounds it
   if (!env_number("PDT_WORKERS", o.workers, EngineOptions::max_workers))
-    env_number("PDT_THREADS", o.workers, EngineOptions::max_workers);  // PDT_THREADS: the 0.1 name
+    env_number("PDT_THREADS", o.workers, EngineOptions::max_workers);  // PDT_THREADS: the older name
   env_number("PDT_BLOCKS_PER_AXIS", o.blocks_per_axis, EngineOptions::max_blocks_per_axis);
-  env_number("PDT_CONTENTION_LOW", o.contention_low, 1);
-  env_number("PDT_CONTENTION_HIGH", o.contention_high, 1);
+  const bool low_set = env_number("PDT_CONTENTION_LOW", o.contention_low, 1);
+  const bool high_set = env_number("PDT_CONTENTION_HIGH", o.contention_high, 1);
+  if ((low_set || high_set) && o.contention_low > o.contention_high) {
+    auto value = [](const char* name, double v, bool set) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "%s=%g%s", name, v, set ? "" : " (not set: the default)");
+      return std::string(buf);
+    };
+    throw Error(ErrorCode::invalid_argument,
+                value("PDT_CONTENTION_LOW", o.contention_low, low_set) + " is above " +
+                    value("PDT_CONTENTION_HIGH", o.contention_high, high_set) +
+                    "; expected PDT_CONTENTION_LOW <= PDT_CONTENTION_HIGH (u- <= u+)");
+  }
   env_number("PDT_CONTENTION_WINDOW", o.contention_window, any);
   env_number("PDT_GRID_SLOTS", o.grid_slots, any);
   env_number("PDT_ESCALATE_AFTER", o.escalate_after, any);

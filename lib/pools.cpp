@@ -77,7 +77,11 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     PDT_FAULT_POINT("cell chunk");
     const std::size_t first = cells.grow(cell_chunk);
     tags.ensure_size(first + cell_chunk);
-    for (std::size_t i = first; i < first + cell_chunk; ++i) cells[i].v[0] = no_vertex;  // not live yet
+    bool any_retired = false;  // ids past clear() keep their incarnations
+    for (std::size_t i = first; i < first + cell_chunk; ++i) {
+      cells[i].v[0] = no_vertex;  // not live yet
+      any_retired |= incarnation(static_cast<CellId>(i)) == last_incarnation;
+    }
     while (ctx.fresh_cell != ctx.fresh_cell_end) {
       const CellId c = ctx.fresh_cell++;
       ++ctx.d_cells;  // free_cell counts a release
@@ -85,7 +89,12 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     }
     ctx.fresh_cell = static_cast<std::uint32_t>(first);
     ctx.fresh_cell_end = static_cast<std::uint32_t>(first + cell_chunk);
-    have = ctx.free_cells.count + cell_chunk;
+    if (any_retired)  // rare: through the free list, which leaves the retired ids out
+      while (ctx.fresh_cell != ctx.fresh_cell_end) {
+        ++ctx.d_cells;
+        free_cell(ctx, ctx.fresh_cell++);
+      }
+    have = ctx.free_cells.count + (ctx.fresh_cell_end - ctx.fresh_cell);
   }
 }
 
@@ -115,6 +124,10 @@ void Triangulation::Impl::free_all_cells(OpContext& ctx) {
 
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
   cells[c].v[0] = no_vertex;
+  if (incarnation(c) == last_incarnation) {  // retired: a next incarnation would wrap
+    --ctx.d_cells;
+    return;
+  }
   cells[c].n[0] = ctx.free_cells.head;
   if (ctx.free_cells.count++ == 0) ctx.free_cells.tail = c;
   ctx.free_cells.head = c;

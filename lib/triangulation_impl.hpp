@@ -15,7 +15,10 @@
 //   cells[c], verts[v] index-based, in StableArrays, so ids never move.
 //   tags[c]   incarnation << 2 | mark. The incarnation counts the allocations
 //             of id c over the triangulation's whole life (clear() keeps it),
-//             so (c, incarnation) names one cell ever. The mark (1 in, 2 out)
+//             so (c, incarnation) names one cell ever: an id that reaches
+//             last_incarnation (2^30 - 1) is retired when that cell dies
+//             (never reused: one id per 2^30 allocations of it), so the
+//             30-bit count never wraps. The mark (1 in, 2 out)
 //             is set by a conflict-zone search on the cells it meets and
 //             cleared before the search returns, so outside a search every
 //             mark is 0 (I7). Only a thread holding a facet of c exclusively
@@ -73,6 +76,7 @@
 // drop_to_flat) reserves first or restores the state it started from.
 #include <array>
 #include <atomic>
+#include <cassert>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -105,6 +109,7 @@ struct Triangulation::Impl {
   detail::StableArray<std::atomic<std::uint32_t>> tags;
   detail::StableArray<VertexRec> verts;
   static constexpr std::uint32_t mark_in = 1, mark_out = 2, mark_bits = 3;
+  static constexpr std::uint32_t last_incarnation = ~std::uint32_t{0} >> 2;
 
   std::atomic<int> dim{-1};
   // Totals; exact whenever no operation is running and every engine worker
@@ -149,6 +154,7 @@ struct Triangulation::Impl {
   // A new incarnation of c, unmarked (c is being (re)made; its writer holds it).
   void renew(CellId c) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
+    assert((t >> 2) < last_incarnation);  // free_cell and reserve_cells retire such ids
     tags[c].store(((t >> 2) + 1) << 2, std::memory_order_relaxed);
   }
   CellHandle handle_of(CellId c) const;

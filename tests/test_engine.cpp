@@ -1101,6 +1101,22 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     (void)error_of([] { (void)pdt::EngineOptions::from_environment(); }, &msg);
     CHECK(msg.find("expected a whole number from 0 to 4096") != std::string::npos);
   }
+  SECTION("thresholds that cross are refused, naming both variables") {
+    for (const auto& [low, high] : {std::pair<const char*, const char*>{"0.95", nullptr}, {nullptr, "0.5"}, {"0.8", "0.6"}}) {
+      EnvGuard env;
+      if (low) env.set("PDT_CONTENTION_LOW", low);
+      if (high) env.set("PDT_CONTENTION_HIGH", high);
+      std::string msg;
+      REQUIRE(error_of([] { (void)pdt::EngineOptions::from_environment(); }, &msg) == pdt::ErrorCode::invalid_argument);
+      INFO(msg);
+      CHECK(msg.find("PDT_CONTENTION_LOW=") != std::string::npos);
+      CHECK(msg.find("PDT_CONTENTION_HIGH=") != std::string::npos);
+      CHECK((msg.find("(not set: the default)") != std::string::npos) == (!low || !high));
+    }
+    EnvGuard env;  // equal is allowed
+    env.set("PDT_CONTENTION_LOW", "0.9");
+    CHECK(pdt::EngineOptions::from_environment().contention_low == 0.9);
+  }
 }
 
 TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {

@@ -2,10 +2,13 @@
 // Removal: after any interleaving of insertions and removals pdt equals CGAL's
 // Delaunay triangulation of the surviving points; removal undoes insertion
 // exactly; dimensions drop and come back; bad ids are rejected without change.
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -16,6 +19,7 @@
 #include "pdt/generate.hpp"
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
+#include "triangulation_impl.hpp"  // a test pushes cell incarnations to their last value
 
 using namespace pdt_test;
 using pdt::Point3;
@@ -640,4 +644,46 @@ TEST_CASE("removal with extreme but finite coordinates", "[remove][extreme]") {
   SECTION("large offset, small extent") { run(1e-3, 1e9); }
   SECTION("subnormal") { run(1e-310, 0); }
   SECTION("the largest doubles") { run(std::numeric_limits<double>::max(), 0); }
+}
+
+TEST_CASE("a cell id at its last incarnation is retired, never wrapped to a repeated handle", "[remove][handles]") {
+  // Cell incarnations are 30 bits: 2^30 reuses of one id would wrap. Push every
+  // id of a mesh to the incarnation before the last, then churn: each id is
+  // made once more (its last incarnation) and, when that cell dies, retired.
+  std::vector<Point3> pts = generated_points(pdt::Distribution::uniform, 300, 5);
+  pdt::Triangulation t;
+  std::vector<pdt::VertexId> vs;
+  for (const Point3& p : pts) vs.push_back(t.insert(p).vertex);
+  auto& impl = pdt::detail::impl_of(t);
+  constexpr std::uint32_t last = std::remove_reference_t<decltype(impl)>::last_incarnation;
+  const pdt::CellId preset = t.cell_id_bound();
+  for (pdt::CellId c = 0; c < preset; ++c) impl.tags[c].store((last - 1) << 2);
+  std::map<std::pair<pdt::CellId, std::uint32_t>, std::array<pdt::VertexId, 4>> seen;  // handle -> its cell
+  std::vector<pdt::CellHandle> at_last;
+  auto look = [&] {
+    for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+      if (!t.is_cell(c)) continue;
+      const pdt::CellHandle h = t.cell_handle(c);
+      if (c < preset) REQUIRE(h.incarnation >= last - 1);  // never wrapped to a small one
+      std::array<pdt::VertexId, 4> v{t.cell_vertex(c, 0), t.cell_vertex(c, 1), t.cell_vertex(c, 2), t.cell_vertex(c, 3)};
+      std::sort(v.begin(), v.end());
+      auto [it, fresh] = seen.emplace(std::pair{c, h.incarnation}, v);
+      REQUIRE(it->second == v);  // one (id, incarnation), one cell
+      if (fresh && h.incarnation == last) at_last.push_back(h);
+    }
+  };
+  std::mt19937_64 rng(9);
+  for (int round = 0; round < 400; ++round) {
+    const std::size_t k = rng() % pts.size();
+    t.remove(vs[k]);
+    vs[k] = t.insert(pts[k]).vertex;
+    look();
+  }
+  CHECK(at_last.size() > 100);
+  std::size_t dead = 0;
+  for (const pdt::CellHandle& h : at_last) dead += !t.cell(h).has_value();
+  CHECK(dead > 50);  // those cells died: their ids were retired, not renewed
+  CHECK(t.cell_id_bound() > preset);
+  require_valid(t);
+  REQUIRE(canonical_tets(t, pts) == cgal_tets(pts));
 }

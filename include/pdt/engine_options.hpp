@@ -31,7 +31,7 @@ struct EngineOptions {
   // workers' blocks. Off: each block is served by its home worker only
   // (the paper's static partition).
   bool stealing = true;
-  // Deprecated: the name of `workers` in pdt 0.1 (it counts workers, not
+  // Deprecated: the older name of `workers` (it counts workers, not
   // threads); used only when workers is 0. PDT_THREADS is read into workers.
   unsigned threads = 0;
   // PDT_REBALANCE (0 or 1), with stealing: when queued work piles up in the

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <coroutine>
 #include <cstdio>
+#include <exception>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -72,37 +73,49 @@ class Trace {
     if (!path.empty()) writer_.emplace(path, box);
   }
   void inserted(std::uint64_t incarnation, const Point3& p) {
-    if (!writer_) return;
-    std::lock_guard lock(m_);
-    index_of_[incarnation] = writer_->insert(p);
+    write([&] { index_of_[incarnation] = writer_->insert(p); });
   }
   // A duplicate insertion and its undo (the refiner never keeps one): both
   // written, so the stream stays the one carried out.
   std::uint64_t duplicate(const Point3& p) {
-    if (!writer_) return 0;
-    std::lock_guard lock(m_);
-    return writer_->insert(p);
+    std::uint64_t k = 0;
+    write([&] { k = writer_->insert(p); });
+    return k;
   }
   void removed_insertion(std::uint64_t k) {
-    if (!writer_) return;
-    std::lock_guard lock(m_);
-    writer_->remove(k);
+    write([&] { writer_->remove(k); });
   }
   void removed(std::uint64_t incarnation) {
-    if (!writer_) return;
-    std::lock_guard lock(m_);
-    auto it = index_of_.find(incarnation);
-    if (it == index_of_.end()) return;
-    writer_->remove(it->second);
-    index_of_.erase(it);
+    write([&] {
+      auto it = index_of_.find(incarnation);
+      if (it == index_of_.end()) return;
+      writer_->remove(it->second);
+      index_of_.erase(it);
+    });
   }
   void close() {
-    if (writer_) writer_->close();
+    write([&] { writer_->close(); });
   }
 
  private:
+  // Under the lock, and once a write has failed (a full disk) every later
+  // call throws that first error again: hooks on other threads would
+  // otherwise report "closed", and the engine keeps whichever came first.
+  template <class F>
+  void write(F&& f) {
+    if (!writer_) return;
+    std::lock_guard lock(m_);
+    if (failed_) std::rethrow_exception(failed_);
+    try {
+      f();
+    } catch (...) {
+      failed_ = std::current_exception();
+      throw;
+    }
+  }
   std::optional<pdt::OpWriter> writer_;  // none: no trace asked for
   std::mutex m_;
+  std::exception_ptr failed_;
   std::unordered_map<std::uint64_t, std::uint64_t> index_of_;  // live vertex incarnation -> its insertion
 };
 

@@ -59,6 +59,9 @@ class LiveInsertions {
  private:
   static constexpr std::uint64_t empty = ~std::uint64_t{0};  // never an index: made_ stops below it
   std::size_t mask() const { return slots_.size() - 1; }
+  // Fibonacci hashing. (Keeping runs of consecutive indices in consecutive
+  // slots, for the cache, made linear probing's clusters run into each other:
+  // pdt run 20-30% slower.)
   std::size_t home(std::uint64_t k) const {
     const std::uint64_t h = k * 0x9E3779B97F4A7C15ull;
     return static_cast<std::size_t>(h ^ (h >> 32)) & mask();

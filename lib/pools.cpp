@@ -2,6 +2,10 @@
 // Storage and per-thread pools (paper §3.2): each context allocates cell and
 // vertex ids from its own free lists, refilled by chunks carved from the
 // shared StableArrays; its count changes are folded into the totals later.
+#include <algorithm>
+#include <cassert>
+#include <mutex>
+
 #include "fault_injection.hpp"
 #include "mix64.hpp"
 #include "triangulation_impl.hpp"
@@ -24,7 +28,99 @@ constexpr std::size_t max_small_vertices = std::size_t{1} << 22;
 constexpr std::uint32_t cell_chunk = 12 * 4096 / sizeof(detail::CellRec);
 constexpr std::uint32_t vertex_chunk = 3 * 4096 / sizeof(detail::VertexRec);
 
+// Free-list segments (storage.hpp): a context keeps fewer than 2S free ids
+// of a kind and trades the rest in segments of S with the spare stack.
+constexpr std::uint32_t cell_segment = cell_chunk;
+constexpr std::uint32_t vertex_segment = vertex_chunk;
+
+template <std::uint32_t S, class Next>
+void push_id(detail::FreeList& l, std::uint32_t id, Next next) {
+  next(id) = l.head;
+  l.head = id;
+  ++l.count;
+  if (l.count == S)
+    l.mark = id;
+  else if (l.count == S + 1)
+    l.boundary = id;
+}
+
+template <std::uint32_t S, class Next>
+std::uint32_t pop_id(detail::FreeList& l, Next next) {
+  const std::uint32_t id = l.head;
+  l.head = next(id);
+  if (l.count == S)
+    l.mark = no_index;  // id was the mark
+  else if (l.count == S + 1)
+    l.boundary = no_index;  // id was the boundary
+  --l.count;
+  return id;
+}
+
+#ifndef NDEBUG
+template <std::uint32_t S, class Next>
+bool list_ok(const detail::FreeList& l, Next next) {
+  std::size_t n = 0, from_mark = 0;
+  bool past_mark = false;
+  std::uint32_t before = no_index;
+  for (std::uint32_t id = l.head; id != no_index; id = next(id)) {
+    if (id == l.mark) {
+      past_mark = true;
+      if (l.boundary != before) return false;
+    }
+    ++n;
+    from_mark += past_mark;
+  }
+  return n == l.count && l.count < 2 * S && (l.count >= S ? past_mark && from_mark == S : l.mark == no_index) &&
+         (l.count >= S + 1 || l.boundary == no_index);
+}
+#endif
+
 }  // namespace
+
+// A push that keeps count < 2S: at 2S the oldest S ids go to the spare stack.
+template <std::uint32_t S, class Next, class Link>
+void Triangulation::Impl::give_id(detail::FreeList& l, std::uint32_t id, detail::SpareSegments& spare, Next next,
+                                  Link link) {
+  push_id<S>(l, id, next);
+  if (l.count < 2 * S) return;
+  const std::uint32_t first = l.mark;
+  next(l.boundary) = no_index;
+  l.count = S;
+  l.mark = l.head;
+  l.boundary = no_index;
+  assert(list_ok<S>(l, next));
+  std::lock_guard lock(spare_mutex);
+  link(first) = spare.head.load(std::memory_order_relaxed);
+  spare.head.store(first, std::memory_order_relaxed);
+  ++spare.segments;
+}
+
+// Takes a spare segment below l (l.count < S, so l stays under 2S). False if
+// there is none.
+template <std::uint32_t S, class Next, class Link>
+bool Triangulation::Impl::take_spare(detail::FreeList& l, detail::SpareSegments& spare, Next next, Link link) {
+  assert(l.count < S);
+  if (spare.head.load(std::memory_order_relaxed) == no_index) return false;  // nothing (or a race: next time)
+  std::uint32_t first;
+  {
+    std::lock_guard lock(spare_mutex);
+    first = spare.head.load(std::memory_order_relaxed);
+    if (first == no_index) return false;
+    spare.head.store(link(first), std::memory_order_relaxed);
+    --spare.segments;
+  }
+  std::uint32_t last = no_index;
+  for (std::uint32_t id = l.head; id != no_index; id = next(id)) last = id;
+  if (last == no_index)
+    l.head = first;
+  else
+    next(last) = first;
+  l.count += S;
+  l.mark = first;
+  l.boundary = last;
+  assert(list_ok<S>(l, next));
+  return true;
+}
 
 namespace detail {
 
@@ -71,43 +167,47 @@ std::uint64_t Triangulation::Impl::new_incarnation(OpContext& ctx) {
 }
 
 void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
-  std::size_t have = ctx.free_cells.count + (ctx.fresh_cell_end - ctx.fresh_cell);
-  while (have < n) {
-    // A new chunk; the ids left in the current one go to the free list first.
+  // What the next allocations can count on: frees meanwhile may give the
+  // oldest S of the list away, but never leave it under S, so the list
+  // counts for at most S.
+  auto have = [&] {
+    return std::min<std::size_t>(ctx.free_cells.count, cell_segment) + (ctx.fresh_cell_end - ctx.fresh_cell);
+  };
+  if (have() >= n) return;
+  if (ctx.free_cells.count < cell_segment &&
+      take_spare<cell_segment>(ctx.free_cells, spare_cells, cell_next(), cell_link()) && have() >= n)
+    return;
+  // A new range of fresh ids, enough for n on its own (a large cavity can
+  // need more than a list ever keeps); the ids left in the current range go
+  // to the free list.
+  const std::size_t size = std::max<std::size_t>(1, (n + cell_chunk - 1) / cell_chunk) * cell_chunk;
+  std::size_t first;
+  for (;;) {
     PDT_FAULT_POINT("cell chunk");
-    const std::size_t first = cells.grow(cell_chunk);
-    tags.ensure_size(first + cell_chunk);
-    bool any_retired = false;  // ids past clear() keep their incarnations
-    for (std::size_t i = first; i < first + cell_chunk; ++i) {
-      cells[i].v[0] = no_vertex;  // not live yet
-      any_retired |= incarnation(static_cast<CellId>(i)) == last_incarnation;
-    }
-    while (ctx.fresh_cell != ctx.fresh_cell_end) {
-      const CellId c = ctx.fresh_cell++;
-      ++ctx.d_cells;  // free_cell counts a release
-      free_cell(ctx, c);
-    }
-    ctx.fresh_cell = static_cast<std::uint32_t>(first);
-    ctx.fresh_cell_end = static_cast<std::uint32_t>(first + cell_chunk);
-    if (any_retired)  // rare: through the free list, which leaves the retired ids out
-      while (ctx.fresh_cell != ctx.fresh_cell_end) {
-        ++ctx.d_cells;
-        free_cell(ctx, ctx.fresh_cell++);
-      }
-    have = ctx.free_cells.count + (ctx.fresh_cell_end - ctx.fresh_cell);
+    first = cells.grow(size);
+    tags.ensure_size(first + size);
+    for (std::size_t i = first; i < first + size; ++i) cells[i].v[0] = no_vertex;  // not live yet
+    // Ids past clear() keep their incarnations: one may be at the last.
+    bool any_retired = false;
+    if (some_at_last_incarnation.load(std::memory_order_relaxed))
+      for (std::size_t i = first; i < first + size; ++i)
+        any_retired |= incarnation(static_cast<CellId>(i)) == last_incarnation;
+    if (!any_retired) break;
+    // Rare (an id allocated 2^30 times, then clear()): that range stays unused.
   }
+  while (ctx.fresh_cell != ctx.fresh_cell_end) {
+    const CellId c = ctx.fresh_cell++;
+    ++ctx.d_cells;  // free_cell counts a release
+    free_cell(ctx, c);
+  }
+  ctx.fresh_cell = static_cast<std::uint32_t>(first);
+  ctx.fresh_cell_end = static_cast<std::uint32_t>(first + size);
+  assert(have() >= n);
 }
 
 CellId Triangulation::Impl::alloc_cell(OpContext& ctx) {
-  CellId c;
-  if (ctx.free_cells.head != no_index) {
-    c = ctx.free_cells.head;
-    ctx.free_cells.head = cells[c].n[0];
-    if (--ctx.free_cells.count == 0) ctx.free_cells.tail = no_index;
-  } else {
-    if (ctx.fresh_cell == ctx.fresh_cell_end) reserve_cells(ctx, 1);
-    c = ctx.fresh_cell++;
-  }
+  if (ctx.free_cells.count == 0 && ctx.fresh_cell == ctx.fresh_cell_end) reserve_cells(ctx, 1);
+  const CellId c = ctx.free_cells.count ? pop_id<cell_segment>(ctx.free_cells, cell_next()) : ctx.fresh_cell++;
   renew(c);
   ++ctx.d_cells;
   return c;
@@ -124,14 +224,10 @@ void Triangulation::Impl::free_all_cells(OpContext& ctx) {
 
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
   cells[c].v[0] = no_vertex;
-  if (incarnation(c) == last_incarnation) {  // retired: a next incarnation would wrap
-    --ctx.d_cells;
-    return;
-  }
-  cells[c].n[0] = ctx.free_cells.head;
-  if (ctx.free_cells.count++ == 0) ctx.free_cells.tail = c;
-  ctx.free_cells.head = c;
   --ctx.d_cells;
+  // Retired: a next incarnation would wrap (the flag spares the tag's load).
+  if (some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) == last_incarnation) return;
+  give_id<cell_segment>(ctx.free_cells, c, spare_cells, cell_next(), cell_link());
 }
 
 VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
@@ -140,13 +236,16 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   // write a vertex only once we hold it, so an id we cannot lock is skipped
   // (a fresh one goes to our free list for later).
   VertexId v = no_vertex;
-  if (ctx.free_vertices.head != no_index && lock_exclusive(ctx, ctx.free_vertices.head)) {
-    v = ctx.free_vertices.head;
-    ctx.free_vertices.head = verts[v].cell;
-    if (--ctx.free_vertices.count == 0) ctx.free_vertices.tail = no_index;
-  }
+  if (ctx.free_vertices.count && lock_exclusive(ctx, ctx.free_vertices.head))
+    v = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
   while (v == no_vertex) {
     if (ctx.fresh_vertex == ctx.fresh_vertex_end) {
+      if (ctx.free_vertices.count < vertex_segment &&
+          take_spare<vertex_segment>(ctx.free_vertices, spare_vertices, vertex_next(), vertex_link()) &&
+          lock_exclusive(ctx, ctx.free_vertices.head)) {
+        v = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
+        break;
+      }
       // Fresh records are all-zero (a free vertex) without construction; see
       // StableArray::grow. The small triangulation reuses its memory, and is
       // single-threaded, so it constructs.
@@ -158,10 +257,8 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
     VertexId f = ctx.fresh_vertex++;
     if (lock_exclusive(ctx, f)) {
       v = f;
-    } else {
-      verts[f].cell = ctx.free_vertices.head;  // the prober only reads multiplicity (0)
-      if (ctx.free_vertices.count++ == 0) ctx.free_vertices.tail = f;
-      ctx.free_vertices.head = f;
+    } else {  // the prober only reads multiplicity (0)
+      give_id<vertex_segment>(ctx.free_vertices, f, spare_vertices, vertex_next(), vertex_link());
     }
   }
   VertexRec& r = verts[v];
@@ -185,9 +282,7 @@ void Triangulation::Impl::free_vertex(OpContext& ctx, VertexId v) {
     r.multiplicity = 0;
     r.stamp.store(0, std::memory_order_relaxed);
   }
-  r.cell = ctx.free_vertices.head;
-  if (ctx.free_vertices.count++ == 0) ctx.free_vertices.tail = v;
-  ctx.free_vertices.head = v;
+  give_id<vertex_segment>(ctx.free_vertices, v, spare_vertices, vertex_next(), vertex_link());
   --ctx.d_vertices;
   if (ctx.last_vertex == v) ctx.last_vertex = no_vertex;
 }
@@ -203,16 +298,16 @@ void Triangulation::Impl::merge_pools(OpContext& into, OpContext& from) {
     ++from.d_vertices;
     free_vertex(from, v);
   }
-  auto splice = [](detail::FreeList& a, detail::FreeList& b, auto next_of) {
-    if (b.count == 0) return;
-    next_of(b.tail) = a.head;
-    if (a.count == 0) a.tail = b.tail;
-    a.head = b.head;
-    a.count += b.count;
-    b = detail::FreeList{};
-  };
-  splice(into.free_cells, from.free_cells, [&](std::uint32_t c) -> std::uint32_t& { return cells[c].n[0]; });
-  splice(into.free_vertices, from.free_vertices, [&](std::uint32_t v) -> std::uint32_t& { return verts[v].cell; });
+  // What from keeps (under 2S of each) into into's lists, which give their
+  // surplus to the spare stacks.
+  while (from.free_cells.count) {
+    const CellId c = pop_id<cell_segment>(from.free_cells, cell_next());
+    give_id<cell_segment>(into.free_cells, c, spare_cells, cell_next(), cell_link());
+  }
+  while (from.free_vertices.count) {
+    const VertexId v = pop_id<vertex_segment>(from.free_vertices, vertex_next());
+    give_id<vertex_segment>(into.free_vertices, v, spare_vertices, vertex_next(), vertex_link());
+  }
   fold_counters(from);
 }
 
@@ -249,6 +344,10 @@ void Triangulation::Impl::clear() {
   recent_vertex.store(no_vertex);
   OpContext& c = *seq;
   c.free_cells = c.free_vertices = detail::FreeList{};
+  for (detail::SpareSegments* spare : {&spare_cells, &spare_vertices}) {
+    spare->head.store(no_index, std::memory_order_relaxed);
+    spare->segments = 0;
+  }
   c.fresh_cell = c.fresh_cell_end = c.fresh_vertex = c.fresh_vertex_end = 0;
   c.d_vertices = c.d_cells = c.d_finite_cells = 0;
   c.last_vertex = no_vertex;

@@ -52,12 +52,29 @@ inline constexpr int facet_vertex[4][3] = {{1, 3, 2}, {0, 2, 3}, {0, 3, 1}, {0, 
 
 inline constexpr std::uint32_t no_index = 0xFFFFFFFFu;
 
-// A singly linked free list of cell or vertex ids threaded through the
-// records (CellRec.n[0], VertexRec.cell). count == 0 <=> head == tail == no_index.
+// A context's singly linked free list of cell or vertex ids threaded through
+// the records (CellRec.n[0], VertexRec.cell), pushed and popped at the head,
+// with S the segment size of its kind (pools.cpp). count == 0 <=> head ==
+// no_index; the last id's next is no_index. count < 2S: at 2S the oldest S
+// ids, from `mark` on, go to the triangulation's spare segments. mark is the
+// id with exactly S ids from it to the end (itself included) when count >= S,
+// else no_index; boundary is the id just before mark when count >= S + 1,
+// else no_index.
 struct FreeList {
   std::uint32_t head = no_index;
-  std::uint32_t tail = no_index;
+  std::uint32_t mark = no_index;
+  std::uint32_t boundary = no_index;
   std::size_t count = 0;
+};
+
+// Free ids no context keeps: segments of exactly S ids each, stacked. A
+// segment is a FreeList chain; its first id links to the next segment's
+// first (CellRec.n[1], VertexRec.scratch: free records do not use them).
+struct SpareSegments {
+  // Written under the triangulation's spare_mutex; read without it only to
+  // skip taking the mutex when there is nothing to take.
+  std::atomic<std::uint32_t> head{no_index};
+  std::size_t segments = 0;
 };
 
 // What an operation of the kernel ended with.

@@ -80,6 +80,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -126,6 +127,15 @@ struct Triangulation::Impl {
   // Who regrows the jump grid as the vertex count grows.
   enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
   std::unique_ptr<OpContext> seq;  // the context of single-threaded calls
+  // Free ids beyond what each context keeps (pools.cpp): a context that frees
+  // more than it allocates gives segments here, one short of ids takes them
+  // before carving new storage, so the storage follows the live mesh however
+  // the work moves between the engine's workers.
+  std::mutex spare_mutex;
+  // Some cell id has reached last_incarnation (then reserve_cells looks for
+  // such ids in the ranges it carves; clear() keeps incarnations).
+  std::atomic<bool> some_at_last_incarnation{false};
+  detail::SpareSegments spare_cells, spare_vertices;
   std::atomic<VertexId> recent_vertex{no_vertex};  // some recently inserted vertex (a walk start)
   ChangeHook hook;                 // Triangulation::set_change_hook's, for seq
   bool report_destroyed = false;
@@ -155,6 +165,8 @@ struct Triangulation::Impl {
   void renew(CellId c) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
     assert((t >> 2) < last_incarnation);  // free_cell and reserve_cells retire such ids
+    if ((t >> 2) + 1 == last_incarnation) [[unlikely]]
+      some_at_last_incarnation.store(true, std::memory_order_relaxed);
     tags[c].store(((t >> 2) + 1) << 2, std::memory_order_relaxed);
   }
   CellHandle handle_of(CellId c) const;
@@ -181,6 +193,23 @@ struct Triangulation::Impl {
   void free_vertex(OpContext& ctx, VertexId v);
   // Gives a context's pooled ids back to another context (engine shutdown).
   void merge_pools(OpContext& into, OpContext& from);
+  // Free-list links (storage.hpp): next id in a list, next spare segment.
+  auto cell_next() {
+    return [this](std::uint32_t c) -> std::uint32_t& { return cells[c].n[0]; };
+  }
+  auto cell_link() {
+    return [this](std::uint32_t c) -> std::uint32_t& { return cells[c].n[1]; };
+  }
+  auto vertex_next() {
+    return [this](std::uint32_t v) -> std::uint32_t& { return verts[v].cell; };
+  }
+  auto vertex_link() {
+    return [this](std::uint32_t v) -> std::uint32_t& { return verts[v].scratch; };
+  }
+  template <std::uint32_t S, class Next, class Link>
+  void give_id(detail::FreeList& l, std::uint32_t id, detail::SpareSegments& spare, Next next, Link link);
+  template <std::uint32_t S, class Next, class Link>
+  bool take_spare(detail::FreeList& l, detail::SpareSegments& spare, Next next, Link link);
   void fold_counters(OpContext& ctx);
   void end_op_counters(OpContext& ctx);  // folds now, or later for an engine worker
   void clear();

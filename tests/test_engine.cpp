@@ -1486,3 +1486,56 @@ TEST_CASE("engine: the skewed generators put their points where they say", "[eng
     ++axis;
   }
 }
+
+TEST_CASE("engine: storage follows the live mesh when workers free what others allocate", "[engine][memory]") {
+  // The mesh is emptied after every round. A worker's pool used to keep what
+  // it freed while another carved new storage for what it made, and a new
+  // engine's workers carved new storage while the triangulation's own pool
+  // held every id the last engine freed (10 engines in turn: the cell id bound
+  // grew 9x). The surplus now goes to shared spare segments.
+  auto round_of = [](pdt::Engine& e, std::mt19937_64& rng) {
+    std::uniform_real_distribution<double> u(0, 1);
+    std::vector<pdt::Engine::Ticket> tickets;
+    for (int i = 0; i < 5000; ++i) tickets.push_back(e.insert({u(rng), u(rng), u(rng)}, {}));
+    e.drain();
+    e.remove_insertions(tickets);
+    e.drain();
+  };
+  for (const auto& [workers, in_turn] : {std::pair{2u, false}, {4u, false}, {2u, true}, {4u, true}}) {
+    INFO(workers << " workers, " << (in_turn ? "engines in turn" : "one engine"));
+    pdt::Triangulation t;
+    tbb::task_arena arena(2);
+    std::mt19937_64 rng(workers);
+    std::uint32_t cells_first = 0, verts_first = 0;
+    if (!in_turn) {
+      arena.execute([&] {
+        pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(workers));
+        for (int round = 0; round < 30; ++round) {
+          round_of(e, rng);
+          REQUIRE(t.number_of_vertices() == 0);
+          if (round == 0) cells_first = t.cell_id_bound(), verts_first = t.vertex_id_bound();
+        }
+      });
+    }
+    if (in_turn) {
+      for (int round = 0; round < 10; ++round) {
+        arena.execute([&] {
+          pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(workers));
+          round_of(e, rng);
+        });
+        REQUIRE(t.number_of_vertices() == 0);
+        if (round == 0) cells_first = t.cell_id_bound(), verts_first = t.vertex_id_bound();
+      }
+    }
+    INFO("cell id bound " << cells_first << " -> " << t.cell_id_bound() << ", vertex id bound " << verts_first
+                          << " -> " << t.vertex_id_bound());
+    // What a worker may keep: under two segments in its list and a chunk's
+    // fresh ids, of each kind.
+    CHECK(t.cell_id_bound() <= cells_first + workers * 3 * 1536);
+    CHECK(t.vertex_id_bound() <= verts_first + workers * 3 * 256);
+    // The triangulation goes on after the engines: their pools were merged.
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int i = 0; i < 100; ++i) t.insert({u(rng), u(rng), u(rng)});
+    require_valid(t);
+  }
+}

@@ -235,7 +235,12 @@ class Engine {
   // Tickets cost memory only while they can still be used: a ticket is
   // released once its insertion is undone, or once its vertex is gone
   // (removed by handle or id); then insertion_result and remove_insertion
-  // refuse it.
+  // refuse it. A removal by handle or id undoes one insertion of a vertex
+  // but no particular ticket, so it releases none: a vertex inserted k times
+  // and lowered by handle keeps its k tickets (and their memory) until it is
+  // gone, and undoing more of them than it has insertions left fails in
+  // flight (OpResult::error, unknown_vertex), which remove_insertions'
+  // all-or-nothing check cannot see. Undo a vertex's insertions one way.
 
   // Calls hook inside every later operation that creates or deletes a vertex
   // (changes.hpp), on the worker that runs it. Set it before submitting:

@@ -68,11 +68,13 @@ enum class RemoveResult {
 };
 
 // Where a point lies relative to the triangulation.
-enum class LocateKind { none /*dimension < 3*/, in_cell, on_facet, on_edge, on_vertex, outside_hull };
+// While dimension() < 3 there are no cells: locate gives on_vertex (with
+// cell == no_cell) for a point at a vertex, and none for any other point.
+enum class LocateKind { none /*dimension < 3, not at a vertex*/, in_cell, on_facet, on_edge, on_vertex, outside_hull };
 
 struct LocateResult {
   LocateKind kind = LocateKind::none;
-  CellId cell = no_cell;        // a cell containing the point (an infinite cell if outside)
+  CellId cell = no_cell;        // a cell containing the point (an infinite cell if outside); no_cell in dimension < 3
   VertexId vertex = no_vertex;  // for on_vertex: the vertex at the point
 };
 
@@ -135,10 +137,15 @@ class Triangulation {
   // The same for one incarnation: a handle whose vertex is gone (even if its
   // id was reused since) is refused with unknown_vertex.
   RemoveResult remove(VertexHandle v);
+  // Empties the triangulation: every cell and vertex dies without a change
+  // report; handles from before read as dead; the id bounds start again.
   void clear();
   // Calls hook inside every later insert/remove that creates or deletes a
   // vertex (see changes.hpp), with the cells it created, and with those it
   // destroyed when report_destroyed. An empty hook turns reporting off.
+  // While an Engine is attached, the engine's operations report to the
+  // engine's hook (Engine::set_change_hook), not to this one; this one
+  // reports again once the engine is gone.
   void set_change_hook(ChangeHook hook, bool report_destroyed = false);
 
   // -- queries (const: thread-safe on a quiescent triangulation) ---------------

@@ -129,7 +129,8 @@ OpRecord* EngineState::make_remove(VertexHandle v) {
                                                 ": it is not in the triangulation (never inserted, already removed" +
                                                 (v.incarnation ? ", or that incarnation is gone)" : ")"));
   };
-  if (v.id == 0 || v.id >= impl.verts.size()) throw dead();
+  if (v.id == 0) throw Error(ErrorCode::unknown_vertex, "cannot remove the infinite vertex (id 0)");
+  if (v.id >= impl.verts.size()) throw dead();
   const std::uint64_t stamp = impl.verts[v.id].stamp.load(std::memory_order_acquire);
   if (stamp == 0 || (v.incarnation && v.incarnation != stamp)) throw dead();
   OpRecord* op = records.acquire();

@@ -271,9 +271,14 @@ MeshCheck check_mesh(const Mesh& mesh) {
   bool degree_checked = false;
   for (std::size_t probe = 0; probe < std::min<std::size_t>(nt, 16) && !degree_checked; ++probe) {
     const auto& c = T[probe];
-    const P3 q((P[c[0]].x() + P[c[1]].x() + P[c[2]].x() + P[c[3]].x()) / 4,
-               (P[c[0]].y() + P[c[1]].y() + P[c[2]].y() + P[c[3]].y()) / 4,
-               (P[c[0]].z() + P[c[1]].z() + P[c[2]].z() + P[c[3]].z()) / 4);
+    // The sum overflows near DBL_MAX: then the sum of quarters (exact there).
+    auto mean = [](double a, double b, double c4, double d) {
+      const double m = (a + b + c4 + d) / 4;
+      return std::isfinite(m) ? m : a / 4 + b / 4 + c4 / 4 + d / 4;
+    };
+    const P3 q(mean(P[c[0]].x(), P[c[1]].x(), P[c[2]].x(), P[c[3]].x()),
+               mean(P[c[0]].y(), P[c[1]].y(), P[c[2]].y(), P[c[3]].y()),
+               mean(P[c[0]].z(), P[c[1]].z(), P[c[2]].z(), P[c[3]].z()));
     std::size_t inside = 0;
     bool generic = true;
     for (std::size_t t = 0; t < nt && generic; ++t) {

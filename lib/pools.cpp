@@ -69,6 +69,7 @@ bool list_ok(const detail::FreeList& l, Next next) {
     }
     ++n;
     from_mark += past_mark;
+    before = id;
   }
   return n == l.count && l.count < 2 * S && (l.count >= S ? past_mark && from_mark == S : l.mark == no_index) &&
          (l.count >= S + 1 || l.boundary == no_index);

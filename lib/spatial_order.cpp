@@ -111,8 +111,8 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   if (n < 64) return cgal_order(points, parallel);
   BoundingBox box;
   for (const Point3& p : points) box.add(p.x, p.y, p.z);
-  // A flat or subnormal axis maps to 0 there; a box reaching +-DBL_MAX scales
-  // without overflow (BoxLattice works on halves).
+  // A flat axis maps to 0 there; a box reaching +-DBL_MAX, or a subnormal
+  // one, scales without overflow (BoxLattice works on halves and pre-scales).
   const BoxLattice lattice(box.lo, box.hi, 1 << key_bits);
   // Keys in the points' order (reading them in the shuffled order would miss
   // the cache at each one), then the shuffle: Fisher-Yates from a fixed seed,

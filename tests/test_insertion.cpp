@@ -744,6 +744,25 @@ TEST_CASE("the jump grid follows where the vertices are", "[insert][locate]") {
   }
 }
 
+TEST_CASE("walks stay short for boxes of any size, subnormal ones included", "[insert][locate][extreme]") {
+  // A box whose extent is subnormal could not be scaled (res / extent
+  // overflowed): every vertex fell in one slot, and 80,000 points walked 97
+  // steps each. Integer lattice points times 2^-1074, 2^-1000, 1, 2^1000.
+  for (double scale : {0x1p-1074, 0x1p-1000, 1.0, 0x1p1000}) {
+    INFO("scale " << scale);
+    std::mt19937_64 rng(5);
+    std::uniform_int_distribution<int> coord(0, 1 << 20);
+    std::vector<Point3> pts;
+    for (int i = 0; i < 20000; ++i) pts.push_back({coord(rng) * scale, coord(rng) * scale, coord(rng) * scale});
+    pdt::Triangulation t;
+    for (const Point3& p : pts) t.insert(p);
+    const double steps = static_cast<double>(t.stats().walk_steps) / static_cast<double>(pts.size());
+    INFO("walk steps per insertion " << steps);
+    CHECK(steps < 10);
+    if (scale == 0x1p-1074) REQUIRE(canonical_tets(t, pts) == cgal_tets(pts));
+  }
+}
+
 TEST_CASE("stale and out-of-range hints are harmless", "[insert][hint]") {
   // A hint is only advice: a refiner may hand over a vertex that has since
   // disappeared. The result must not depend on it.

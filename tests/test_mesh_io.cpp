@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -592,6 +593,16 @@ TEST_CASE("check_mesh accepts Delaunay tetrahedralizations", "[io]") {
       CHECK(c.valid);
       CHECK(c.message.find("negatively") == std::string::npos);
     }
+  }
+  SECTION("near DBL_MAX the cover degree is still probed") {
+    // A centroid's plain sum overflowed there, and the degree test was skipped.
+    const double M = std::numeric_limits<double>::max();
+    const pdt::Mesh m = delaunay_of({{0, 0, 0}, {M, 0, 0}, {0, M, 0}, {M / 4, M / 4, M / 8}, {M / 8, M / 4, -M / 2}});
+    REQUIRE(m.tets.size() >= 2);
+    const auto c = pdt::check_mesh(m);
+    INFO(c.message);
+    CHECK(c.valid);
+    CHECK(c.message.find("not probed") == std::string::npos);
   }
   SECTION("coplanar points without tets") {
     pdt::Mesh m;

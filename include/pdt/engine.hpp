@@ -224,8 +224,9 @@ class Engine {
   // and rethrows the insertion's own error if it failed.
   InsertResult insertion_result(Ticket t) const;
   // Undoes insertion `t` of this engine; it waits for that insertion to finish
-  // first, so a stream can be replayed without barriers. Throws at once for a
-  // ticket never issued, already undone, or released.
+  // first, so a stream can be replayed without barriers. Throws pdt::Error
+  // (unknown_vertex: there is no insertion to undo) at once for a ticket
+  // never issued, already undone, or released.
   void remove_insertion(Ticket t, Callback done = {});
   // A batch of undos, submitted in spatial order (as insert_batch). All or
   // nothing: throws, and undoes nothing, if any ticket was never issued, is

@@ -1496,7 +1496,8 @@ TEST_CASE("engine: storage follows the live mesh when workers free what others a
   auto round_of = [](pdt::Engine& e, std::mt19937_64& rng) {
     std::uniform_real_distribution<double> u(0, 1);
     std::vector<pdt::Engine::Ticket> tickets;
-    for (int i = 0; i < 5000; ++i) tickets.push_back(e.insert({u(rng), u(rng), u(rng)}, {}));
+    const std::size_t n = pdt_test::scaled(5000, 1000);
+    for (std::size_t i = 0; i < n; ++i) tickets.push_back(e.insert({u(rng), u(rng), u(rng)}, {}));
     e.drain();
     e.remove_insertions(tickets);
     e.drain();
@@ -1510,7 +1511,7 @@ TEST_CASE("engine: storage follows the live mesh when workers free what others a
     if (!in_turn) {
       arena.execute([&] {
         pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(workers));
-        for (int round = 0; round < 30; ++round) {
+        for (int round = 0; round < (pdt_test::kTsan ? 6 : 30); ++round) {
           round_of(e, rng);
           REQUIRE(t.number_of_vertices() == 0);
           if (round == 0) cells_first = t.cell_id_bound(), verts_first = t.vertex_id_bound();
@@ -1518,7 +1519,7 @@ TEST_CASE("engine: storage follows the live mesh when workers free what others a
       });
     }
     if (in_turn) {
-      for (int round = 0; round < 10; ++round) {
+      for (int round = 0; round < (pdt_test::kTsan ? 4 : 10); ++round) {
         arena.execute([&] {
           pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(workers));
           round_of(e, rng);

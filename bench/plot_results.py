@@ -66,6 +66,15 @@ def finish(ax, threads, title):
     ax.legend(fontsize=8)
 
 
+def save(fig, axes, used, title, out):
+    """Blanks the panels past the first `used`, titles the figure and writes it."""
+    for ax in axes[used:]:
+        ax.axis("off")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+
+
 def plot_main(rows, out, machine):
     dists = sorted({r["dist"] for r in rows if r["experiment"] == "main"}, key=["uniform", "normal", "line"].index)
     fig, axes = panel_axes(len(dists))
@@ -82,11 +91,7 @@ def plot_main(rows, out, machine):
                 threads = ts
         points = next(r["points"] for r in rows if r["dist"] == d)
         finish(ax, threads, f"{d}, {int(points):,} points")
-    for ax in axes[len(dists):]:
-        ax.axis("off")
-    fig.suptitle(f"bench_parallel: speedup over 1 worker ({machine})")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save(fig, axes, len(dists), f"bench_parallel: speedup over 1 worker ({machine})", out)
 
 
 def plot_skewed(rows, out, machine):
@@ -104,11 +109,7 @@ def plot_skewed(rows, out, machine):
                 ax.plot(ts, sp, style, label=label)
                 threads = ts
         finish(ax, threads, d)
-    for ax in axes[len(streams):]:
-        ax.axis("off")
-    fig.suptitle(f"bench_parallel --skewed: speedup over 1 worker ({machine})")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save(fig, axes, len(streams), f"bench_parallel --skewed: speedup over 1 worker ({machine})", out)
 
 
 def plot_interleaved(rows, out, machine):
@@ -128,11 +129,7 @@ def plot_interleaved(rows, out, machine):
             ax.plot(ts, [cgal[1] / times[t] for t in ts], "s--", label="pdt, over CGAL sequential")
         points = next(r["points"] for r in rows if r["dist"] == d)
         finish(ax, ts, f"{d}, {int(points):,} points, interleaved")
-    for ax in axes[len(dists):]:
-        ax.axis("off")
-    fig.suptitle(f"bench_parallel, interleaved ({machine})")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save(fig, axes, len(dists), f"bench_parallel, interleaved ({machine})", out)
 
 
 def plot_peers(rows, out, machine):
@@ -165,11 +162,7 @@ def plot_peers(rows, out, machine):
         ax.set_title(f"{d}, {int(points):,} points")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
-    for ax in axes[len(dists):]:
-        ax.axis("off")
-    fig.suptitle(f"bench_peers: batch triangulation time ({machine})")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save(fig, axes, len(dists), f"bench_peers: batch triangulation time ({machine})", out)
 
 
 def main():

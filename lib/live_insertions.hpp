@@ -6,8 +6,8 @@
 // the stream's length; the writer (a refiner's trace, written inside its
 // change hook) wants no allocation per operation. Both are met by a set of
 // the live indices by open addressing: linear probing on a Fibonacci hash,
-// deletion by backward shift, the table doubled when half full (16 bytes or
-// less per live insertion, amortised).
+// deletion by backward shift, the table doubled when half full (16 to 32
+// bytes per live insertion at the most live there have been).
 //
 // Invariant: slots_.size() is 0 or a power of two at least twice live_; the
 // slots hold exactly the live indices (each k < made_, each once), every one

@@ -93,7 +93,6 @@ void Triangulation::Impl::give_id(detail::FreeList& l, std::uint32_t id, detail:
   std::lock_guard lock(spare_mutex);
   link(first) = spare.head.load(std::memory_order_relaxed);
   spare.head.store(first, std::memory_order_relaxed);
-  ++spare.segments;
 }
 
 // Takes a spare segment below l (l.count < S, so l stays under 2S). False if
@@ -108,7 +107,6 @@ bool Triangulation::Impl::take_spare(detail::FreeList& l, detail::SpareSegments&
     first = spare.head.load(std::memory_order_relaxed);
     if (first == no_index) return false;
     spare.head.store(link(first), std::memory_order_relaxed);
-    --spare.segments;
   }
   std::uint32_t last = no_index;
   for (std::uint32_t id = l.head; id != no_index; id = next(id)) last = id;
@@ -345,10 +343,8 @@ void Triangulation::Impl::clear() {
   recent_vertex.store(no_vertex);
   OpContext& c = *seq;
   c.free_cells = c.free_vertices = detail::FreeList{};
-  for (detail::SpareSegments* spare : {&spare_cells, &spare_vertices}) {
-    spare->head.store(no_index, std::memory_order_relaxed);
-    spare->segments = 0;
-  }
+  spare_cells.head.store(no_index, std::memory_order_relaxed);
+  spare_vertices.head.store(no_index, std::memory_order_relaxed);
   c.fresh_cell = c.fresh_cell_end = c.fresh_vertex = c.fresh_vertex_end = 0;
   c.d_vertices = c.d_cells = c.d_finite_cells = 0;
   c.last_vertex = no_vertex;

@@ -74,7 +74,6 @@ struct SpareSegments {
   // Written under the triangulation's spare_mutex; read without it only to
   // skip taking the mutex when there is nothing to take.
   std::atomic<std::uint32_t> head{no_index};
-  std::size_t segments = 0;
 };
 
 // What an operation of the kernel ended with.

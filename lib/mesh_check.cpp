@@ -140,7 +140,9 @@ MeshCheck check_mesh(const Mesh& mesh) {
         return fail(r, "no tetrahedra, but the points span 3D (" + pt_str(i) + " is off the plane of points 0, " +
                            std::to_string(b1) + ", " + std::to_string(b2) + ")");
     r.valid = true;
-    r.message = "no tetrahedra; the " + std::to_string(np) + " points are coplanar, so none is expected";
+    const std::string points = b1 == np ? "a single point"
+                               : "the " + std::to_string(np) + " points are " + (b2 == np ? "collinear" : "coplanar");
+    r.message = "no tetrahedra; " + points + ", so none is expected";
     return r;
   }
 

@@ -426,9 +426,9 @@ std::vector<Point3> read_node_section(InputFile& f, std::uint64_t* first_index) 
   std::string_view fields[8];
   std::size_t n = 0;
   if (!next_content_line(f, fields, 8, n)) f.fail("file ends before the node header; expected 'N 3 nattr nmarker'");
-  if (n < 2) f.fail("node header has " + std::to_string(n) + " field(s); expected 'N 3 nattr nmarker'");
   const std::uint64_t count = parse_count(f, fields[0], "node count");
-  const std::uint64_t dim = parse_count(f, fields[1], "dimension");
+  // TetGen reads a header of the count alone as dimension 3 (the other fields default).
+  const std::uint64_t dim = n < 2 ? 3 : parse_count(f, fields[1], "dimension");
   if (dim != 3) f.fail("dimension " + std::to_string(dim) + "; expected 3");
   std::vector<Point3> pts;
   pts.reserve(sane_reserve(count));

@@ -322,6 +322,8 @@ TEST_CASE("off, node and smesh", "[io]") {
   CHECK(pdt::read_points(node) == std::vector<pdt::Point3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
   write_file(node, "2 3 0 0\n0 0 0 0\n2 1 1 1\n");
   expect_bad_points(node, node + ":3:", "expected 1 (consecutive)");
+  write_file(node, "2\n0 0 0 0\n1 1 1 1\n");  // the count alone: TetGen's defaults (3 dimensions)
+  CHECK(pdt::read_points(node) == std::vector<pdt::Point3>{{0, 0, 0}, {1, 1, 1}});
   write_file(node, "2 2 0 0\n0 0 0\n1 1 1\n");
   expect_bad_points(node, node + ":1:", "dimension 2; expected 3");
 
@@ -607,9 +609,17 @@ TEST_CASE("check_mesh accepts Delaunay tetrahedralizations", "[io]") {
   SECTION("coplanar points without tets") {
     pdt::Mesh m;
     m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}};
-    CHECK(pdt::check_mesh(m).valid);
+    auto c = pdt::check_mesh(m);
+    CHECK(c.valid);
+    CHECK(c.message == "no tetrahedra; the 4 points are coplanar, so none is expected");
     m.points.push_back({0, 0, 1});
     CHECK_FALSE(pdt::check_mesh(m).valid);
+    m.points = {{0, 0, 0}, {1, 1, 1}, {2, 2, 2}};
+    c = pdt::check_mesh(m);
+    CHECK(c.valid);
+    CHECK(c.message == "no tetrahedra; the 3 points are collinear, so none is expected");
+    m.points = {{5, 5, 5}};
+    CHECK(pdt::check_mesh(m).message == "no tetrahedra; a single point, so none is expected");
   }
   SECTION("the kernel's triangulation of random points") {
     const pdt::Mesh m = delaunay_of(uniform_points(2000, 3));

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "common/io_test_util.hpp"
 #include "common/tool_run.hpp"
@@ -77,16 +78,31 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK_FALSE(std::filesystem::exists(d.file("x.ops")));
   }
   SECTION("bad option values") {
-    for (const char* args : {"gen --points ten --out x.ops", "gen --points 10 --dist gaussian --out x.ops",
-                             "gen --points 10 --remove-fraction 2 --out x.ops", "gen --points 10", "gen --out x.ops",
-                             "gen --points", "run", "run a.ops b.ops", "run a.ops --threads -1",
-                             "run a.ops --out mesh.stl", "run a.ops --vtu-ascii", "run a.ops --out m.node --vtu-ascii",
-                             "run a.ops --in-order", "gen --points 10 --out x.ops.gz", "run a.ply.gz",
-                             "refine --domain sphere --size 0.5 --trace t.opsb.gz", "check"}) {
+    // Each refusal names the option and what to give instead.
+    const std::pair<const char*, const char*> cases[] = {
+        {"gen --points ten --out x.ops", "--points 'ten': expected a non-negative integer"},
+        {"gen --points 10 --dist gaussian --out x.ops", "unknown distribution 'gaussian'; expected uniform, normal"},
+        {"gen --points 10 --remove-fraction 2 --out x.ops", "--remove-fraction 2: expected a number in [0, 1]"},
+        {"gen --points 10", "gen needs --out FILE"},
+        {"gen --out x.ops", "gen needs --points N"},
+        {"gen --points", "option --points needs a value"},
+        {"run", "run needs an input file"},
+        {"run a.ops b.ops", "run takes one input file; got 'a.ops' and 'b.ops'"},
+        {"run a.ops --threads -1", "--threads '-1': expected a non-negative integer"},
+        {"run a.ops --out mesh.stl", "--out mesh.stl: expected a name ending in .node (TetGen) or .vtu (VTK)"},
+        {"run a.ops --vtu-ascii", "--vtu-ascii applies to a .vtu output"},
+        {"run a.ops --out m.node --vtu-ascii", "--vtu-ascii applies to a .vtu output"},
+        {"run a.ops --in-order", "--in-order applies to point files"},
+        {"gen --points 10 --out x.ops.gz", "--out x.ops.gz: pdt writes streams uncompressed"},
+        {"run a.ply.gz", "a.ply.gz: gzipped .ply files are not read"},
+        {"refine --domain sphere --size 0.5 --trace t.opsb.gz", "--trace t.opsb.gz: pdt writes streams uncompressed"},
+        {"check", "check needs a mesh file"},
+    };
+    for (const auto& [args, why] : cases) {
       INFO(args);
       const Result r = run_pdt(d, args);
       CHECK(r.code == 2);
-      CHECK(r.err.rfind("pdt: ", 0) == 0);
+      CHECK(r.err.rfind(std::string("pdt: ") + why, 0) == 0);
       CHECK(r.err.find("usage: pdt") != std::string::npos);
     }
   }

@@ -10,14 +10,19 @@
 # (CGAL's exact predicates), zlib, and mimalloc when PDT_ALLOCATOR=mimalloc. They go in Libs,
 # not Libs.private, so that a plain `pkg-config --libs pdt` links; a shared libpdt.so records
 # them itself and lists none.
-set(PDT_INSTALL_PKGCONFIGDIR "${CMAKE_INSTALL_LIBDIR}/pkgconfig" CACHE STRING "Where pdt.pc goes")
+# Empty: <libdir>/pkgconfig, following CMAKE_INSTALL_LIBDIR (as the CMake package's folder).
+set(PDT_INSTALL_PKGCONFIGDIR "" CACHE STRING "Where pdt.pc goes (empty: <libdir>/pkgconfig)")
+set(pdt_install_pkgconfigdir "${PDT_INSTALL_PKGCONFIGDIR}")
+if(pdt_install_pkgconfigdir STREQUAL "")
+  set(pdt_install_pkgconfigdir "${CMAKE_INSTALL_LIBDIR}/pkgconfig")
+endif()
 
-if(IS_ABSOLUTE "${PDT_INSTALL_PKGCONFIGDIR}")
+if(IS_ABSOLUTE "${pdt_install_pkgconfigdir}")
   set(_pdt_pc_prefix "${CMAKE_INSTALL_PREFIX}")  # not relocatable, but what was asked for
 else()
   # One ".." per component of the pkgconfig dir: lib/pkgconfig -> ${pcfiledir}/../..
   set(_pdt_pc_prefix "\${pcfiledir}")
-  string(REPLACE "/" ";" _pdt_pc_parts "${PDT_INSTALL_PKGCONFIGDIR}")
+  string(REPLACE "/" ";" _pdt_pc_parts "${pdt_install_pkgconfigdir}")
   foreach(_part IN LISTS _pdt_pc_parts)
     if(NOT _part STREQUAL "" AND NOT _part STREQUAL ".")
       string(APPEND _pdt_pc_prefix "/..")
@@ -35,8 +40,8 @@ endforeach()
 set(_pdt_pc_libs "-L\${libdir} -lpdt")
 get_target_property(_pdt_pc_type pdt TYPE)
 if(_pdt_pc_type STREQUAL "STATIC_LIBRARY")
-  set(_pdt_pc_private gmp mpfr z)
-  set(_pdt_pc_files ${GMP_LIBRARIES} ${MPFR_LIBRARIES} ${ZLIB_LIBRARIES})
+  set(_pdt_pc_private mpfr gmp z)  # a static link needs each library before those it uses
+  set(_pdt_pc_files ${MPFR_LIBRARIES} ${GMP_LIBRARIES} ${ZLIB_LIBRARIES})
   if(PDT_ALLOCATOR STREQUAL "mimalloc")
     # The library's name as built (e.g. mimalloc-debug in a debug mimalloc), from its file.
     set(_pdt_mi_file "")
@@ -77,4 +82,4 @@ if(PDT_SANITIZE)
 endif()
 
 configure_file(${PROJECT_SOURCE_DIR}/cmake/pdt.pc.in ${PROJECT_BINARY_DIR}/pdt.pc @ONLY)
-install(FILES ${PROJECT_BINARY_DIR}/pdt.pc DESTINATION ${PDT_INSTALL_PKGCONFIGDIR})
+install(FILES ${PROJECT_BINARY_DIR}/pdt.pc DESTINATION ${pdt_install_pkgconfigdir})

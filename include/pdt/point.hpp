@@ -1,4 +1,4 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Kept for code written against pdt 0.1: Point3 (and Box) now live in geometry.hpp.
+// Kept for code that includes it: Point3 (and Box) live in geometry.hpp.
 #include "pdt/geometry.hpp"

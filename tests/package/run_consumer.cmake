@@ -128,6 +128,15 @@ endif()
 step("configure consumer" ${CMAKE_COMMAND} -C ${INIT_CACHE} -S ${CONSUMER_SOURCE_DIR} -B ${build}
      -G ${GENERATOR} -DCMAKE_BUILD_TYPE=${CONFIG} -DEXPECTED_VERSION=${EXPECTED_VERSION})
 step("build consumer" ${CMAKE_COMMAND} --build ${build} --config ${CONFIG})
+# A consumer without a build type gets no warning from pdt's dependencies: CGAL's
+# "performance notice" is about CGAL code compiled in the consumer, and pdt's is in libpdt.
+file(REMOVE_RECURSE ${build}-untyped)
+step("configure consumer without a build type" ${CMAKE_COMMAND} -C ${INIT_CACHE} -S ${CONSUMER_SOURCE_DIR}
+     -B ${build}-untyped -G ${GENERATOR} -DCMAKE_BUILD_TYPE= -DEXPECTED_VERSION=${EXPECTED_VERSION})
+if(step_output MATCHES "CMake Warning|performance notice")
+  fail("configuring a consumer without a build type warns:\n${step_output}")
+endif()
+file(REMOVE_RECURSE ${build}-untyped)
 
 file(GLOB_RECURSE exe ${build}/pdt_consumer ${build}/*/pdt_consumer ${build}/pdt_consumer.exe ${build}/*/pdt_consumer.exe)
 if(NOT exe)

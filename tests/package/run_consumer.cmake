@@ -131,6 +131,17 @@ step("build consumer" ${CMAKE_COMMAND} --build ${build} --config ${CONFIG})
 # A consumer without a build type gets no warning from pdt's dependencies: CGAL's
 # "performance notice" is about CGAL code compiled in the consumer, and pdt's is in libpdt.
 file(REMOVE_RECURSE ${build}-untyped)
+# A dependency missing at the consumer is reported with what to install.
+execute_process(COMMAND ${CMAKE_COMMAND} -C ${INIT_CACHE} -S ${CONSUMER_SOURCE_DIR} -B ${build}-untyped
+                -G ${GENERATOR} -DCMAKE_BUILD_TYPE=${CONFIG} -DEXPECTED_VERSION=${EXPECTED_VERSION}
+                -DCMAKE_DISABLE_FIND_PACKAGE_TBB=ON
+                RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE out)
+string(REGEX REPLACE "[ \t\r\n]+" " " out "${out}")  # CMake wraps the reason over lines
+if(rc EQUAL 0 OR NOT out MATCHES "pdt needs TBB, which was not found: install oneTBB \\(Debian: libtbb-dev")
+  fail("a consumer without oneTBB's package is not told what to install (exit ${rc}):\n${out}")
+endif()
+message(STATUS "${tag}: a missing dependency names its package: ok")
+file(REMOVE_RECURSE ${build}-untyped)
 step("configure consumer without a build type" ${CMAKE_COMMAND} -C ${INIT_CACHE} -S ${CONSUMER_SOURCE_DIR}
      -B ${build}-untyped -G ${GENERATOR} -DCMAKE_BUILD_TYPE= -DEXPECTED_VERSION=${EXPECTED_VERSION})
 if(step_output MATCHES "CMake Warning|performance notice")

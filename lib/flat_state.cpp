@@ -133,8 +133,8 @@ void Triangulation::Impl::build_3d(OpContext& ctx, VertexId apex) {
       for (const std::uint32_t k : order) {
         const VertexId v = rest[k];
         bool outside = false;
-        CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside);
-        gather_conflict_zone(ctx, pt(v), c);
+        CellId c = walk(ctx, pt(v), finite_cell_of(prev), &outside, filter.eps());  // every vertex is in the box
+        gather_conflict_zone(ctx, pt(v), c, filter.eps());
         reserve_cells(ctx, ctx.boundary.size());
         PDT_FAULT_POINT("edge map");
         ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());

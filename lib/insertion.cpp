@@ -40,6 +40,15 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     }
     hint = only_if_alive->anchor;  // and a walk start next to it
   }
+  // The filter's box holds every vertex (box_filter.hpp). An engine's domain
+  // is in it from the start and the engine refuses points outside it, so its
+  // workers, which read the box, never see it grow: a point outside would be
+  // added by a global step, with the world stopped.
+  if (!filter.contains(p)) {
+    if (ctx.locking) return OpStatus::needs_global;
+    filter.extend(p);
+  }
+  const detail::FilterEps eps = filter.eps();
   if (dim.load(std::memory_order_acquire) < 3) {
     if (ctx.locking) return OpStatus::needs_global;
     out.result = insert_flat(ctx, p);  // counts, folds and reports
@@ -63,7 +72,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     if (!lock_shared(ctx, cells[c].v[nw & 3])) return rollback();
   }
   bool outside = false;
-  c = walk(ctx, p, c, &outside);
+  c = walk(ctx, p, c, &outside, eps);
   if (c == no_cell) return rollback();
   if (!outside) {
     const CellRec& cr = cells[c];
@@ -85,7 +94,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     }
   }
   if (!lock_cell_exclusive(ctx, c)) return rollback();
-  if (gather_conflict_zone(ctx, p, c) != OpStatus::done) return rollback();
+  if (gather_conflict_zone(ctx, p, c, eps) != OpStatus::done) return rollback();
   // Everything the change needs, before its first write: cells, map room,
   // report room, the vertex. A failure here changes nothing.
   try {
@@ -109,7 +118,8 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   return OpStatus::done;
 }
 
-OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0) {
+OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0,
+                                                   const detail::FilterEps& eps) {
   // Bowyer-Watson: the cells whose (perturbed) circumsphere contains p form a
   // connected, star-shaped conflict zone; search it breadth first. c0 is held
   // exclusively; each cell joining the zone is locked exclusively before its
@@ -147,7 +157,7 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
         const std::uint32_t m = mark(nb);
         if (m == mark_in) continue;
         if (m != mark_out) {
-          if (in_conflict(nb, p)) {
+          if (in_conflict(nb, p, eps)) {
             if (!lock_exclusive(ctx, cells[nb].v[nw & 3])) {
               status = OpStatus::rollback;
               break;

@@ -51,7 +51,8 @@ VertexId Triangulation::Impl::start_vertex(OpContext& ctx, const KPoint& p, Vert
   return no_vertex;
 }
 
-CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool* outside) const {
+CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool* outside,
+                                 const detail::FilterEps& eps) const {
   // Visibility walk (Devillers, Pion, Teillaud): cross a facet that p is
   // strictly beyond; the facets are tried from a random one so the walk cannot
   // cycle. Never stops in a finite cell that p is outside of.
@@ -74,7 +75,7 @@ CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool
       if (nb == prev) continue;
       const KPoint* a[4] = {q[0], q[1], q[2], q[3]};
       a[i] = &p;
-      if (orient(*a[0], *a[1], *a[2], *a[3]) < 0) {
+      if (detail::filtered_orient(*a[0], *a[1], *a[2], *a[3], eps.orient) < 0) {
         next = nb;
         via = i;
         break;
@@ -97,10 +98,10 @@ CellId Triangulation::Impl::walk(OpContext& ctx, const KPoint& p, CellId c, bool
   }
 }
 
-bool Triangulation::Impl::in_conflict(CellId c, const KPoint& p) const {
+bool Triangulation::Impl::in_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const {
   const CellRec& cr = cells[c];
   int k = index_of(c, 0);
-  if (k < 0) return perturbed_insphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p) > 0;
+  if (k < 0) return perturbed_insphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p, eps.insphere) > 0;
   // Infinite cell: in conflict when p is beyond its hull facet, or on the
   // facet's plane and inside its (perturbed) circumcircle. The facet order is
   // CGAL's, for which orientation(i0, i1, i2, p) has the sign of the cell with
@@ -114,7 +115,7 @@ bool Triangulation::Impl::in_conflict(CellId c, const KPoint& p) const {
   const KPoint& a = pt(cr.v[i0]);
   const KPoint& b = pt(cr.v[i1]);
   const KPoint& d = pt(cr.v[i2]);
-  int o = orient(a, b, d, p);
+  int o = detail::filtered_orient(a, b, d, p, eps.orient);
   if (o != 0) return o > 0;
   return perturbed_incircle(a, b, d, p) > 0;
 }
@@ -179,7 +180,7 @@ OpStatus Triangulation::Impl::locate(OpContext& ctx, const KPoint& q, VertexId h
     if (start == no_cell) return rollback();
   }
   bool outside = false;
-  const CellId c = walk(ctx, q, start, &outside);
+  const CellId c = walk(ctx, q, start, &outside, filter.eps_for(q));
   if (c == no_cell) return rollback();
   out.cell = c;
   if (outside) {
@@ -223,7 +224,7 @@ OpStatus Triangulation::Impl::nearest_vertex(OpContext& ctx, const KPoint& q, Ve
   const CellId start = hold_start_cell(*this, ctx, s);
   if (start == no_cell) return rollback();
   bool outside = false;
-  const CellId c = walk(ctx, q, start, &outside);
+  const CellId c = walk(ctx, q, start, &outside, filter.eps_for(q));
   if (c == no_cell) return rollback();
   VertexId best = no_vertex;
   for (int i = 0; i < 4; ++i) {

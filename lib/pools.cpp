@@ -340,6 +340,7 @@ void Triangulation::Impl::clear() {
   flat_index.clear();
   basis.clear();
   grid = detail::JumpGrid{};
+  filter.clear();
   recent_vertex.store(no_vertex);
   OpContext& c = *seq;
   c.free_cells = c.free_vertices = detail::FreeList{};

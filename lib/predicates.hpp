@@ -12,7 +12,9 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
+#include <limits>
 
+#include "box_filter.hpp"
 #include "pdt/geometry.hpp"
 
 namespace pdt::detail {
@@ -31,10 +33,12 @@ inline int orient(const KPoint& a, const KPoint& b, const KPoint& c, const KPoin
 inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xyz(*a, *b) == CGAL::SMALLER; }
 
 // > 0: p inside the circumsphere of the positively oriented (p0,p1,p2,p3);
-// < 0: outside. Never 0: ties are decided by the perturbation.
+// < 0: outside. Never 0: ties are decided by the perturbation. eps: a
+// BoxFilter's in-sphere epsilon for a box holding the five points (infinity:
+// none), which decides the clear cases before CGAL's predicate.
 inline int perturbed_insphere(const KPoint& p0, const KPoint& p1, const KPoint& p2, const KPoint& p3,
-                              const KPoint& p) {
-  int s = static_cast<int>(CGAL::side_of_oriented_sphere(p0, p1, p2, p3, p));
+                              const KPoint& p, double eps = std::numeric_limits<double>::infinity()) {
+  int s = filtered_side_of_sphere(p0, p1, p2, p3, p, eps);
   if (s != 0) return s;
   const KPoint* pts[5] = {&p0, &p1, &p2, &p3, &p};
   std::sort(pts, pts + 5, lex_less);

@@ -45,6 +45,8 @@
 //      hull is convex (the infinite cells pass the same test).
 //   I6 V - E + F - C = 0 counting the infinite vertex (a triangulated 3-sphere).
 //   I7 no cell is marked.
+// Always (checked by validate()): every live vertex lies in filter's box, and
+// the filter's epsilons are those of its box (box_filter.hpp).
 // While dimension() < 3 there is no cell: the live vertices are listed in
 // `flat`, verts[v].cell holds v's position in `flat`, and `basis` holds
 // dimension()+1 affinely independent vertices.
@@ -123,6 +125,12 @@ struct Triangulation::Impl {
   detail::AffineBasis basis;
 
   const bool is_small;  // a removal's scratch triangulation: no jump grid
+  // A box holding every point ever inserted since clear() (and an attached
+  // engine's domain): the predicates among its points skip CGAL's per-call
+  // bound (box_filter.hpp). Grown only by single-threaded insertions while no
+  // engine is attached, and by an engine attaching (before its workers run);
+  // engine workers only read it.
+  detail::BoxFilter filter;
   detail::JumpGrid grid;
   // Who regrows the jump grid as the vertex count grows.
   enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
@@ -262,12 +270,13 @@ struct Triangulation::Impl {
   // closure contains p, or an infinite cell whose hull facet p is strictly
   // beyond (then *outside = true). Locks shared as it goes; no_cell means a
   // rollback.
-  CellId walk(OpContext& ctx, const KPoint& p, CellId start, bool* outside) const;
+  // eps: filter.eps_for(p) (or none), for the walk's orientation tests.
+  CellId walk(OpContext& ctx, const KPoint& p, CellId start, bool* outside, const detail::FilterEps& eps) const;
   VertexId start_vertex(OpContext& ctx, const KPoint& p, VertexId hint) const;
   CellId finite_cell_of(VertexId v) const;
   // Is c in conflict with p: p inside c's perturbed circumsphere (an infinite
   // cell: beyond its hull facet, or on its plane inside its circumcircle)?
-  bool in_conflict(CellId c, const KPoint& p) const;
+  bool in_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const;
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
   void grid_rebuild(std::size_t slots = 0);
 
@@ -297,7 +306,7 @@ struct Triangulation::Impl {
   OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
                   const CellHandle* only_if_alive = nullptr);
   // Marks are cleared before it returns, whatever it returns.
-  OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0);
+  OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0, const detail::FilterEps& eps);
   void cone_from_vertex(OpContext& ctx, VertexId v);
   void link_cone(OpContext& ctx);  // the cone's internal adjacencies (boundary[i].outer = new cell)
 

@@ -28,6 +28,7 @@ bool Triangulation::Impl::validate(std::string* why) const {
     if (why) *why = msg.os.str();
     return false;
   };
+  if (!filter.check()) return fail(f << "the predicate filter's epsilons do not match its box");
   // Vertices (I4) and counts.
   std::size_t live_vertices = 0;
   for (VertexId v = 1; v < verts.size(); ++v) {
@@ -36,6 +37,7 @@ bool Triangulation::Impl::validate(std::string* why) const {
     const KPoint& p = verts[v].p;
     if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z()))
       return fail(f << "vertex " << v << " has a non-finite coordinate");
+    if (!filter.contains(p)) return fail(f << "vertex " << v << " lies outside the predicate filter's box");
     if (dim == 3) {
       CellId c = verts[v].cell;
       if (!cell_alive(c)) return fail(f << "vertex " << v << ": incident cell " << c << " is not a live cell");
@@ -109,7 +111,7 @@ bool Triangulation::Impl::validate(std::string* why) const {
       CellId d = cells[c].n[i] >> 2;
       VertexId opp = cells[d].v[cells[c].n[i] & 3];
       if (opp == 0) continue;
-      if (in_conflict(c, pt(opp)))
+      if (in_conflict(c, pt(opp), detail::FilterEps{}))  // CGAL's predicates alone: a check of the filter too
         return fail(f << "facet " << i << " of cell " << c << " is not locally Delaunay: vertex " << opp
                       << " of neighbour " << d << " is inside its circumsphere");
     }

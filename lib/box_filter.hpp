@@ -127,10 +127,22 @@ class BoxFilter {
   FilterEps eps_;
 };
 
+// CGAL's predicates, out of line: the filtered forms below call them only for
+// the tests the box cannot decide, and stay small enough to inline.
+[[gnu::noinline]] inline int cgal_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
+                                         const BoxFilter::KPoint& r, const BoxFilter::KPoint& s) {
+  return static_cast<int>(CGAL::orientation(p, q, r, s));
+}
+[[gnu::noinline]] inline int cgal_side_of_sphere(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
+                                                 const BoxFilter::KPoint& r, const BoxFilter::KPoint& s,
+                                                 const BoxFilter::KPoint& t) {
+  return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
+}
+
 // CGAL::orientation(p, q, r, s), decided by the box's epsilon when it can be.
 inline int filtered_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q, const BoxFilter::KPoint& r,
                            const BoxFilter::KPoint& s, double eps) {
-  if (!(eps < std::numeric_limits<double>::infinity())) return static_cast<int>(CGAL::orientation(p, q, r, s));
+  if (!(eps < std::numeric_limits<double>::infinity())) return cgal_orient(p, q, r, s);
   // Static_filters/Orientation_3.h: the same differences, the same determinant.
   const double pqx = q.x() - p.x(), pqy = q.y() - p.y(), pqz = q.z() - p.z();
   const double prx = r.x() - p.x(), pry = r.y() - p.y(), prz = r.z() - p.z();
@@ -138,7 +150,7 @@ inline int filtered_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& 
   const double det = CGAL::determinant(pqx, pqy, pqz, prx, pry, prz, psx, psy, psz);
   if (det > eps) return 1;
   if (det < -eps) return -1;
-  return static_cast<int>(CGAL::orientation(p, q, r, s));
+  return cgal_orient(p, q, r, s);
 }
 
 // CGAL::side_of_oriented_sphere(p, q, r, s, t), decided by the box's epsilon
@@ -146,8 +158,7 @@ inline int filtered_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& 
 inline int filtered_side_of_sphere(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
                                    const BoxFilter::KPoint& r, const BoxFilter::KPoint& s,
                                    const BoxFilter::KPoint& t, double eps) {
-  if (!(eps < std::numeric_limits<double>::infinity()))
-    return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
+  if (!(eps < std::numeric_limits<double>::infinity())) return cgal_side_of_sphere(p, q, r, s, t);
   // Static_filters/Side_of_oriented_sphere_3.h: the same differences and
   // squared norms, the same determinant (rows p, r, q, s).
   const double ptx = p.x() - t.x(), pty = p.y() - t.y(), ptz = p.z() - t.z();
@@ -162,7 +173,7 @@ inline int filtered_side_of_sphere(const BoxFilter::KPoint& p, const BoxFilter::
       CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
   if (det > eps) return 1;
   if (det < -eps) return -1;
-  return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
+  return cgal_side_of_sphere(p, q, r, s, t);
 }
 
 }  // namespace pdt::detail

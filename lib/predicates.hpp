@@ -32,14 +32,10 @@ inline int orient(const KPoint& a, const KPoint& b, const KPoint& c, const KPoin
 
 inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xyz(*a, *b) == CGAL::SMALLER; }
 
-// > 0: p inside the circumsphere of the positively oriented (p0,p1,p2,p3);
-// < 0: outside. Never 0: ties are decided by the perturbation. eps: a
-// BoxFilter's in-sphere epsilon for a box holding the five points (infinity:
-// none), which decides the clear cases before CGAL's predicate.
-inline int perturbed_insphere(const KPoint& p0, const KPoint& p1, const KPoint& p2, const KPoint& p3,
-                              const KPoint& p, double eps = std::numeric_limits<double>::infinity()) {
-  int s = filtered_side_of_sphere(p0, p1, p2, p3, p, eps);
-  if (s != 0) return s;
+// The perturbation's decision for five points whose in-sphere determinant
+// is exactly zero (see perturbed_insphere). Out of line: ties are rare.
+[[gnu::noinline]] inline int perturbed_insphere_tie(const KPoint& p0, const KPoint& p1, const KPoint& p2,
+                                                    const KPoint& p3, const KPoint& p) {
   const KPoint* pts[5] = {&p0, &p1, &p2, &p3, &p};
   std::sort(pts, pts + 5, lex_less);
   // Two iterations suffice (Devillers & Teillaud): the leading monomials.
@@ -52,6 +48,16 @@ inline int perturbed_insphere(const KPoint& p0, const KPoint& p1, const KPoint& 
     if (pts[i] == &p0 && (o = orient(p, p1, p2, p3)) != 0) return o;
   }
   return -1;  // unreachable for a non-degenerate tetrahedron
+}
+
+// > 0: p inside the circumsphere of the positively oriented (p0,p1,p2,p3);
+// < 0: outside. Never 0: ties are decided by the perturbation. eps: a
+// BoxFilter's in-sphere epsilon for a box holding the five points (infinity:
+// none), which decides the clear cases before CGAL's predicate.
+inline int perturbed_insphere(const KPoint& p0, const KPoint& p1, const KPoint& p2, const KPoint& p3,
+                              const KPoint& p, double eps = std::numeric_limits<double>::infinity()) {
+  const int s = filtered_side_of_sphere(p0, p1, p2, p3, p, eps);
+  return s != 0 ? s : perturbed_insphere_tie(p0, p1, p2, p3, p);
 }
 
 inline int coplanar_orient(const KPoint& a, const KPoint& b, const KPoint& c) {

@@ -240,8 +240,16 @@ struct Triangulation::Impl {
   void finish_change(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation);
 
   // -- locks (vertex_locks.cpp; no-ops when !ctx.locking) -----------------------
-  bool lock_shared(OpContext& ctx, VertexId v);
-  bool lock_exclusive(OpContext& ctx, VertexId v);  // upgrades a shared lock we hold
+  // Inline: most contexts take no lock words (the sequential one, an engine's
+  // only worker), and the walk and the conflict search ask per vertex.
+  bool lock_shared(OpContext& ctx, VertexId v) {
+    return !ctx.locking || ctx.alone || v == 0 || lock_shared_word(ctx, v);
+  }
+  bool lock_exclusive(OpContext& ctx, VertexId v) {  // upgrades a shared lock we hold
+    return !ctx.locking || ctx.alone || v == 0 || lock_exclusive_word(ctx, v);
+  }
+  bool lock_shared_word(OpContext& ctx, VertexId v);  // the lock words themselves
+  bool lock_exclusive_word(OpContext& ctx, VertexId v);
   bool lock_cell_exclusive(OpContext& ctx, CellId c);
   void release_all(OpContext& ctx);
   // Holds v's lock word exclusively, for its lifetime, while a context with

@@ -20,8 +20,8 @@ namespace pdt {
 
 using detail::OpContext;
 
-bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
-  if (!ctx.locking || ctx.alone || v == 0) return true;
+bool Triangulation::Impl::lock_shared_word(OpContext& ctx, VertexId v) {
+  assert(ctx.locking && !ctx.alone && v != 0);
   std::atomic<std::int32_t>& w = verts[v].lock;
   std::int32_t cur = w.load(std::memory_order_relaxed);
   if (cur == -static_cast<std::int32_t>(ctx.id)) return true;
@@ -43,8 +43,8 @@ bool Triangulation::Impl::lock_shared(OpContext& ctx, VertexId v) {
   return false;
 }
 
-bool Triangulation::Impl::lock_exclusive(OpContext& ctx, VertexId v) {
-  if (!ctx.locking || ctx.alone || v == 0) return true;
+bool Triangulation::Impl::lock_exclusive_word(OpContext& ctx, VertexId v) {
+  assert(ctx.locking && !ctx.alone && v != 0);
   std::atomic<std::int32_t>& w = verts[v].lock;
   const std::int32_t mine = -static_cast<std::int32_t>(ctx.id);
   std::int32_t cur = w.load(std::memory_order_relaxed);

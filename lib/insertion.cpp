@@ -27,6 +27,15 @@ std::uint64_t edge_key(VertexId a, VertexId b) {
 
 OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
                                      const CellHandle* only_if_alive) {
+  // The filter's box holds every vertex (box_filter.hpp). An engine's domain
+  // is in it from the start and the engine refuses points outside it, so its
+  // workers, which read the box, never see it grow: a point outside would be
+  // added by a global step, with the world stopped. (First: nothing is held.)
+  if (!filter.contains(p)) {
+    if (ctx.locking) return OpStatus::needs_global;
+    filter.extend(p);
+  }
+  const detail::FilterEps eps = filter.eps();
   if (only_if_alive) {
     // No cell lives below dimension 3; otherwise the cell's anchor, held from
     // here on, keeps it as it is until the insertion is done.
@@ -40,15 +49,6 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     }
     hint = only_if_alive->anchor;  // and a walk start next to it
   }
-  // The filter's box holds every vertex (box_filter.hpp). An engine's domain
-  // is in it from the start and the engine refuses points outside it, so its
-  // workers, which read the box, never see it grow: a point outside would be
-  // added by a global step, with the world stopped.
-  if (!filter.contains(p)) {
-    if (ctx.locking) return OpStatus::needs_global;
-    filter.extend(p);
-  }
-  const detail::FilterEps eps = filter.eps();
   if (dim.load(std::memory_order_acquire) < 3) {
     if (ctx.locking) return OpStatus::needs_global;
     out.result = insert_flat(ctx, p);  // counts, folds and reports

@@ -11,8 +11,13 @@
 #include <random>
 #include <vector>
 
+#include <oneapi/tbb/task_arena.h>
+
 #include "box_filter.hpp"
+#include "pdt/engine.hpp"
+#include "pdt/triangulation.hpp"
 #include "predicates.hpp"
+#include "triangulation_impl.hpp"
 
 using pdt::detail::BoxFilter;
 using pdt::detail::FilterEps;
@@ -181,4 +186,52 @@ TEST_CASE("box filter: the perturbed in-sphere test is the same with and without
               pdt::detail::perturbed_insphere(a, b, c, d, q));
     }
   }
+}
+
+TEST_CASE("box filter: the triangulation's box holds every vertex and an engine's domain; a worker never grows it") {
+  pdt::Triangulation t;
+  for (const pdt::Point3& p : {pdt::Point3{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.2, 0.3, 0.1}}) t.insert(p);
+  pdt::Triangulation::Impl& m = pdt::detail::impl_of(t);
+  CHECK(m.filter.contains(KPoint(1, 1, 1)));
+  CHECK_FALSE(m.filter.contains(KPoint(2, 0, 0)));
+  CHECK(m.filter.eps().insphere < inf);
+  // A locking context (an engine worker's) meeting a point outside the box
+  // hands the insertion to a global step, holding nothing and changing nothing.
+  pdt::detail::OpContext worker(m.new_context_id(), true);
+  pdt::Triangulation::Impl::Inserted out;
+  CHECK(m.insert(worker, pdt::detail::to_kpoint({2, 0, 0}), pdt::no_vertex, out) == pdt::detail::OpStatus::needs_global);
+  CHECK(worker.held_shared.empty());
+  CHECK(worker.held_exclusive.empty());
+  // Also when it should insert only if a cell is alive (whose anchor it would hold).
+  pdt::CellId live = 0;
+  while (!t.is_cell(live) || !t.is_finite_cell(live)) ++live;
+  const pdt::CellHandle h = m.handle_of(live);
+  CHECK(m.insert(worker, pdt::detail::to_kpoint({2, 0, 0}), pdt::no_vertex, out, &h) ==
+        pdt::detail::OpStatus::needs_global);
+  CHECK(worker.held_shared.empty());
+  CHECK(worker.held_exclusive.empty());
+  CHECK_FALSE(m.filter.contains(KPoint(2, 0, 0)));
+  CHECK(t.number_of_vertices() == 5);
+  // Inside the box it inserts as usual.
+  CHECK(m.insert(worker, pdt::detail::to_kpoint({0.5, 0.25, 0.125}), pdt::no_vertex, out) == pdt::detail::OpStatus::done);
+  m.fold_counters(worker);
+  CHECK(t.number_of_vertices() == 6);
+  // An engine's domain joins the box when it attaches, before its workers run.
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, pdt::Box{{-3, -1, 0}, {4, 1, 2}});
+    CHECK(m.filter.contains(KPoint(-3, -1, 0)));
+    CHECK(m.filter.contains(KPoint(4, 1, 2)));
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> x(-3, 4), y(-1, 1), z(0, 2);
+    for (int i = 0; i < 3000; ++i) e.insert({x(rng), y(rng), z(rng)}, [](const pdt::OpResult&) {});
+    e.drain();
+  });
+  m.merge_pools(*m.seq, worker);
+  std::string why;
+  CHECK(t.validate(&why));  // every vertex in the box, and Delaunay by CGAL's predicates alone
+  INFO(why);
+  CHECK(t.number_of_vertices() == 3006);
+  t.clear();
+  CHECK_FALSE(m.filter.contains(KPoint(0, 0, 0)));  // cleared with the vertices
 }

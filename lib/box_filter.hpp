@@ -108,17 +108,17 @@ class BoxFilter {
     }
     const double bm = std::max({b[0], b[1], b[2]});
     if (!std::isfinite(bm)) return e;
-    const double one = std::max(1.0, bm);
+    const double bm1 = std::max(1.0, bm);  // max(1, Bm) of the underflow slack
     constexpr double ulp_min = std::numeric_limits<double>::denorm_min();  // 2^-1074
     constexpr double round_up = 1.0 + 0x1p-40;
     if (bm < 1e102) {
       const double eps = 5.1107127829973299e-15 * b[0] * b[1] * b[2];  // CGAL's Orientation_3 constant
-      if (eps >= 1e-290) e.orient = (eps + 4096 * ulp_min * (one * one)) * round_up;
+      if (eps >= 1e-290) e.orient = (eps + 4096 * ulp_min * (bm1 * bm1)) * round_up;
     }
     if (bm < 1e61) {
       // CGAL's Side_of_oriented_sphere_3 constant, and its order of factors.
       const double eps = 1.2466136531027298e-13 * b[0] * b[1] * b[2] * (bm * bm);
-      if (eps >= 1e-290) e.insphere = (eps + 4096 * ulp_min * (72 * one * one * one * one)) * round_up;
+      if (eps >= 1e-290) e.insphere = (eps + 4096 * ulp_min * (72 * bm1 * bm1 * bm1 * bm1)) * round_up;
     }
     return e;
   }

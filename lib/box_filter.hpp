@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // A static filter for the orientation and in-sphere tests among points known
-// to lie in one box, in front of CGAL's own filtered predicates.
+// to lie in one box, in front of CGAL's own filtered predicates: the box and
+// its epsilons; the tests that use them are predicates.hpp's filtered_*.
 //
 // CGAL's Epick predicates first try a semi-static filter: they evaluate the
 // determinant in doubles, then bound its rounding error by a constant times
@@ -47,11 +48,12 @@
 // insphere_eps are the values compute() derives from lo and hi (+infinity:
 // the filter is off, e.g. for an empty or degenerate box, whose tests all go
 // to CGAL).
+#include <algorithm>
 #include <cassert>
 #include <cmath>
 #include <limits>
 
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include "predicates.hpp"
 
 namespace pdt::detail {
 
@@ -63,8 +65,6 @@ struct FilterEps {
 
 class BoxFilter {
  public:
-  using KPoint = CGAL::Exact_predicates_inexact_constructions_kernel::Point_3;
-
   BoxFilter() { clear(); }
   void clear() {
     constexpr double inf = std::numeric_limits<double>::infinity();
@@ -76,18 +76,15 @@ class BoxFilter {
     return lo_[0] <= x && x <= hi_[0] && lo_[1] <= y && y <= hi_[1] && lo_[2] <= z && z <= hi_[2];
   }
   bool contains(const KPoint& p) const { return contains(p.x(), p.y(), p.z()); }
-  // Grows the box to hold the box [a, b] (a <= b) and recomputes the epsilons.
-  void extend(const double a[3], const double b[3]) {
+  // Grows the box to hold p and recomputes the epsilons.
+  void extend(const KPoint& p) {
+    const double c[3] = {p.x(), p.y(), p.z()};
     for (int i = 0; i < 3; ++i) {
-      lo_[i] = std::min(lo_[i], a[i]);
-      hi_[i] = std::max(hi_[i], b[i]);
+      lo_[i] = std::min(lo_[i], c[i]);
+      hi_[i] = std::max(hi_[i], c[i]);
     }
     eps_ = compute(lo_, hi_);
     assert(check());
-  }
-  void extend(const KPoint& p) {
-    const double c[3] = {p.x(), p.y(), p.z()};
-    extend(c, c);
   }
   // The epsilons for tests among points of the box, p one of them; off for
   // a p outside it.
@@ -126,54 +123,5 @@ class BoxFilter {
   double lo_[3], hi_[3];
   FilterEps eps_;
 };
-
-// CGAL's predicates, out of line: the filtered forms below call them only for
-// the tests the box cannot decide, and stay small enough to inline.
-[[gnu::noinline]] inline int cgal_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
-                                         const BoxFilter::KPoint& r, const BoxFilter::KPoint& s) {
-  return static_cast<int>(CGAL::orientation(p, q, r, s));
-}
-[[gnu::noinline]] inline int cgal_side_of_sphere(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
-                                                 const BoxFilter::KPoint& r, const BoxFilter::KPoint& s,
-                                                 const BoxFilter::KPoint& t) {
-  return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
-}
-
-// CGAL::orientation(p, q, r, s), decided by the box's epsilon when it can be.
-inline int filtered_orient(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q, const BoxFilter::KPoint& r,
-                           const BoxFilter::KPoint& s, double eps) {
-  if (!(eps < std::numeric_limits<double>::infinity())) return cgal_orient(p, q, r, s);
-  // Static_filters/Orientation_3.h: the same differences, the same determinant.
-  const double pqx = q.x() - p.x(), pqy = q.y() - p.y(), pqz = q.z() - p.z();
-  const double prx = r.x() - p.x(), pry = r.y() - p.y(), prz = r.z() - p.z();
-  const double psx = s.x() - p.x(), psy = s.y() - p.y(), psz = s.z() - p.z();
-  const double det = CGAL::determinant(pqx, pqy, pqz, prx, pry, prz, psx, psy, psz);
-  if (det > eps) return 1;
-  if (det < -eps) return -1;
-  return cgal_orient(p, q, r, s);
-}
-
-// CGAL::side_of_oriented_sphere(p, q, r, s, t), decided by the box's epsilon
-// when it can be.
-inline int filtered_side_of_sphere(const BoxFilter::KPoint& p, const BoxFilter::KPoint& q,
-                                   const BoxFilter::KPoint& r, const BoxFilter::KPoint& s,
-                                   const BoxFilter::KPoint& t, double eps) {
-  if (!(eps < std::numeric_limits<double>::infinity())) return cgal_side_of_sphere(p, q, r, s, t);
-  // Static_filters/Side_of_oriented_sphere_3.h: the same differences and
-  // squared norms, the same determinant (rows p, r, q, s).
-  const double ptx = p.x() - t.x(), pty = p.y() - t.y(), ptz = p.z() - t.z();
-  const double pt2 = CGAL::square(ptx) + CGAL::square(pty) + CGAL::square(ptz);
-  const double qtx = q.x() - t.x(), qty = q.y() - t.y(), qtz = q.z() - t.z();
-  const double qt2 = CGAL::square(qtx) + CGAL::square(qty) + CGAL::square(qtz);
-  const double rtx = r.x() - t.x(), rty = r.y() - t.y(), rtz = r.z() - t.z();
-  const double rt2 = CGAL::square(rtx) + CGAL::square(rty) + CGAL::square(rtz);
-  const double stx = s.x() - t.x(), sty = s.y() - t.y(), stz = s.z() - t.z();
-  const double st2 = CGAL::square(stx) + CGAL::square(sty) + CGAL::square(stz);
-  const double det =
-      CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
-  if (det > eps) return 1;
-  if (det < -eps) return -1;
-  return cgal_side_of_sphere(p, q, r, s, t);
-}
 
 }  // namespace pdt::detail

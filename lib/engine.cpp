@@ -81,9 +81,8 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   idle_count.store(static_cast<int>(nworkers));
   // Every point the workers insert lies in the domain: in the filter's box
   // from now on, which they only read (box_filter.hpp, Impl::insert).
-  const double lo[3] = {domain.lo.x + 0.0, domain.lo.y + 0.0, domain.lo.z + 0.0};
-  const double hi[3] = {domain.hi.x + 0.0, domain.hi.y + 0.0, domain.hi.z + 0.0};
-  impl.filter.extend(lo, hi);
+  impl.filter.extend(detail::to_kpoint(domain.lo));
+  impl.filter.extend(detail::to_kpoint(domain.hi));
   impl.grid_growth = Triangulation::Impl::GridGrowth::engine;
   impl.seq->hook = nullptr;  // the engine's hook (set_change_hook) reports its global steps
   impl.seq->report_destroyed = false;

@@ -14,7 +14,6 @@
 #include <algorithm>
 #include <limits>
 
-#include "box_filter.hpp"
 #include "pdt/geometry.hpp"
 
 namespace pdt::detail {
@@ -28,6 +27,53 @@ inline KPoint to_kpoint(const Point3& p) { return KPoint(p.x + 0.0, p.y + 0.0, p
 
 inline int orient(const KPoint& a, const KPoint& b, const KPoint& c, const KPoint& d) {
   return static_cast<int>(CGAL::orientation(a, b, c, d));
+}
+
+// The tests below, with an epsilon from a BoxFilter (box_filter.hpp, where
+// the bound is argued) for a box holding all their points: CGAL's
+// determinant, in CGAL's order, decides when it is beyond eps; otherwise (and
+// for eps = infinity: no box) CGAL's predicate does, out of line so that the
+// filtered forms stay small enough to inline.
+[[gnu::noinline]] inline int orient_out_of_line(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s) {
+  return orient(p, q, r, s);
+}
+[[gnu::noinline]] inline int side_of_sphere_out_of_line(const KPoint& p, const KPoint& q, const KPoint& r,
+                                                        const KPoint& s, const KPoint& t) {
+  return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
+}
+
+// CGAL::orientation(p, q, r, s).
+inline int filtered_orient(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s, double eps) {
+  if (!(eps < std::numeric_limits<double>::infinity())) return orient_out_of_line(p, q, r, s);
+  // Static_filters/Orientation_3.h: the same differences, the same determinant.
+  const double pqx = q.x() - p.x(), pqy = q.y() - p.y(), pqz = q.z() - p.z();
+  const double prx = r.x() - p.x(), pry = r.y() - p.y(), prz = r.z() - p.z();
+  const double psx = s.x() - p.x(), psy = s.y() - p.y(), psz = s.z() - p.z();
+  const double det = CGAL::determinant(pqx, pqy, pqz, prx, pry, prz, psx, psy, psz);
+  if (det > eps) return 1;
+  if (det < -eps) return -1;
+  return orient_out_of_line(p, q, r, s);
+}
+
+// CGAL::side_of_oriented_sphere(p, q, r, s, t).
+inline int filtered_side_of_sphere(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s,
+                                   const KPoint& t, double eps) {
+  if (!(eps < std::numeric_limits<double>::infinity())) return side_of_sphere_out_of_line(p, q, r, s, t);
+  // Static_filters/Side_of_oriented_sphere_3.h: the same differences and
+  // squared norms, the same determinant (rows p, r, q, s).
+  const double ptx = p.x() - t.x(), pty = p.y() - t.y(), ptz = p.z() - t.z();
+  const double pt2 = CGAL::square(ptx) + CGAL::square(pty) + CGAL::square(ptz);
+  const double qtx = q.x() - t.x(), qty = q.y() - t.y(), qtz = q.z() - t.z();
+  const double qt2 = CGAL::square(qtx) + CGAL::square(qty) + CGAL::square(qtz);
+  const double rtx = r.x() - t.x(), rty = r.y() - t.y(), rtz = r.z() - t.z();
+  const double rt2 = CGAL::square(rtx) + CGAL::square(rty) + CGAL::square(rtz);
+  const double stx = s.x() - t.x(), sty = s.y() - t.y(), stz = s.z() - t.z();
+  const double st2 = CGAL::square(stx) + CGAL::square(sty) + CGAL::square(stz);
+  const double det =
+      CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
+  if (det > eps) return 1;
+  if (det < -eps) return -1;
+  return side_of_sphere_out_of_line(p, q, r, s, t);
 }
 
 inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xyz(*a, *b) == CGAL::SMALLER; }
@@ -51,9 +97,8 @@ inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xy
 }
 
 // > 0: p inside the circumsphere of the positively oriented (p0,p1,p2,p3);
-// < 0: outside. Never 0: ties are decided by the perturbation. eps: a
-// BoxFilter's in-sphere epsilon for a box holding the five points (infinity:
-// none), which decides the clear cases before CGAL's predicate.
+// < 0: outside. Never 0: ties are decided by the perturbation. eps: as for
+// filtered_side_of_sphere (infinity: CGAL's predicate alone).
 inline int perturbed_insphere(const KPoint& p0, const KPoint& p1, const KPoint& p2, const KPoint& p3,
                               const KPoint& p, double eps = std::numeric_limits<double>::infinity()) {
   const int s = filtered_side_of_sphere(p0, p1, p2, p3, p, eps);

@@ -87,6 +87,7 @@
 #include <vector>
 
 #include "affine_basis.hpp"
+#include "box_filter.hpp"
 #include "flat_index.hpp"
 #include "jump_grid.hpp"
 #include "op_context.hpp"

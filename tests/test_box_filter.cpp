@@ -229,8 +229,9 @@ TEST_CASE("box filter: the triangulation's box holds every vertex and an engine'
   });
   m.merge_pools(*m.seq, worker);
   std::string why;
-  CHECK(t.validate(&why));  // every vertex in the box, and Delaunay by CGAL's predicates alone
+  const bool valid = t.validate(&why);  // every vertex in the box, and Delaunay by CGAL's predicates alone
   INFO(why);
+  CHECK(valid);
   CHECK(t.number_of_vertices() == 3006);
   t.clear();
   CHECK_FALSE(m.filter.contains(KPoint(0, 0, 0)));  // cleared with the vertices

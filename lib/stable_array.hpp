@@ -30,6 +30,8 @@
 #include <new>
 #include <type_traits>
 
+#include "huge_pages.hpp"
+
 #ifdef PDT_USE_MIMALLOC
 #include <mimalloc.h>
 #endif
@@ -43,18 +45,20 @@ class StableArray {
   static_assert(std::is_trivially_destructible_v<T>);
 
  public:
-  // huge_pages: ask for transparent huge pages (advice only; the kernel may
-  // ignore it) past the array's first 4 MiB. An array that grows large then
+  // huge_pages: the array may grow large; then, if huge_pages_advised()
+  // (PDT_HUGE_PAGES=1), ask for transparent huge pages (advice only; the
+  // kernel may ignore it) past the array's first 4 MiB. An array that grows large then
   // takes one fault and one TLB entry per 2 MiB instead of per 4 KiB, while a
   // small one stays on 4 KiB pages: a huge page would cost it 2 MiB of
   // memory however little it holds (a program with a hundred small
   // triangulations would hold 600 MiB).
   explicit StableArray(std::size_t max_elements, bool huge_pages = false) : capacity_(max_elements) {
+    [[maybe_unused]] const bool advise = huge_pages && huge_pages_advised();  // may throw: before the mapping
     void* p = ::mmap(nullptr, bytes(), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
     if (p == MAP_FAILED) throw std::bad_alloc();
     data_ = static_cast<T*>(p);
 #ifdef MADV_HUGEPAGE
-    if (huge_pages) {
+    if (advise) {
       constexpr std::uintptr_t small_part = std::uintptr_t{4} << 20, huge_page = std::uintptr_t{2} << 20;
       const auto base = reinterpret_cast<std::uintptr_t>(p);
       const std::uintptr_t from = (base + small_part + huge_page - 1) & ~(huge_page - 1);

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "fault_injection.hpp"
+#include "huge_pages.hpp"
 #include "mix64.hpp"
 #include "pdt/error.hpp"
 
@@ -19,9 +20,10 @@ T* TicketTable::SlotAllocator<T>::allocate(std::size_t n) {
   const std::size_t bytes = n * sizeof(T);
   if (bytes < huge) return std::allocator<T>().allocate(n);
   const std::size_t rounded = (bytes + huge - 1) / huge * huge;
+  const bool advise = huge_pages_advised();  // may throw: before the allocation
   void* p = std::aligned_alloc(huge, rounded);
   if (!p) throw std::bad_alloc();
-  ::madvise(p, rounded, MADV_HUGEPAGE);
+  if (advise) ::madvise(p, rounded, MADV_HUGEPAGE);
   return static_cast<T*>(p);
 }
 

@@ -11,7 +11,7 @@
 // The slots live in 16 shards (ticket mod 16), each an open-addressing table
 // with backward-shift deletion under its own mutex. 16, not more: a finish
 // holds its shard for one find, and at 1M live tickets a shard's slots fill
-// 4 MiB, large enough for huge pages (SlotAllocator); a batch finishes in
+// 4 MiB, large enough for huge pages (SlotAllocator, when advised); a batch finishes in
 // spatial order, so each find lands on a random slot.
 // Invariants: a slot exists for every ticket issued and not released;
 // pending slots are never swept; a parked undo exists only on a pending slot.
@@ -88,8 +88,9 @@ class TicketTable {
     bool inserted = false;
     bool undone = false;
   };
-  // The slots' memory: blocks of 2 MiB and more on transparent huge pages, so
-  // that the scattered finds of a large batch do not miss the TLB each time.
+  // The slots' memory: blocks of 2 MiB and more, 2 MiB-aligned, so that with
+  // PDT_HUGE_PAGES=1 (huge_pages.hpp) they lie on transparent huge pages and
+  // the scattered finds of a large batch do not miss the TLB each time.
   template <class T>
   struct SlotAllocator {
     using value_type = T;

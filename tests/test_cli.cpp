@@ -255,3 +255,36 @@ TEST_CASE("pdt run triangulates a point file as a batch, or in file order, with 
   CHECK(r.out.find("imbalance") != std::string::npos);
   CHECK(r.out.find("validate         ok") != std::string::npos);
 }
+
+TEST_CASE("PDT_HUGE_PAGES: 1 gives the same mesh as 0, anything else is refused naming it", "[cli]") {
+  if (!have_tool()) return;
+  TempDir d;
+  // 150k points: the cell array passes the 4 MiB from which huge pages are advised.
+  Result r = run_pdt(d, "gen --points 150000 --out '" + d.file("s.opsb") + "'");
+  REQUIRE(r.code == 0);
+  auto tets_line = [](const std::string& out) {
+    const std::size_t at = out.find("finite tets");
+    return at == std::string::npos ? std::string() : out.substr(at, out.find('\n', at) - at);
+  };
+  std::string expected;
+  for (const char* value : {"0", "1", "", "2", "yes"}) {
+    INFO("PDT_HUGE_PAGES='" << value << "'");
+    ::setenv("PDT_HUGE_PAGES", value, 1);
+    r = run_pdt(d, "run '" + d.file("s.opsb") + "' --validate");
+    ::unsetenv("PDT_HUGE_PAGES");
+    INFO(r.out << r.err);
+    if (std::string(value) == "2" || std::string(value) == "yes") {
+      CHECK(r.code == 2);
+      CHECK(r.err.find(std::string("PDT_HUGE_PAGES='") + value + "' is not a valid value (expected 0 or 1)") !=
+            std::string::npos);
+      CHECK(r.out.empty());
+      continue;
+    }
+    REQUIRE(r.code == 0);
+    CHECK(r.out.find("validate         ok") != std::string::npos);
+    const std::string tets = tets_line(r.out);
+    CHECK_FALSE(tets.empty());
+    if (expected.empty()) expected = tets;
+    CHECK(tets == expected);
+  }
+}

@@ -185,6 +185,8 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     PDT_FAULT_POINT("cell chunk");
     first = cells.grow(size);
     tags.ensure_size(first + size);
+    cells.populate(first, first + size);
+    tags.populate(first, first + size);  // renew() reads a tag before writing it
     for (std::size_t i = first; i < first + size; ++i) cells[i].v[0] = no_vertex;  // not live yet
     // Ids past clear() keep their incarnations: one may be at the last.
     bool any_retired = false;
@@ -250,6 +252,7 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
       // single-threaded, so it constructs.
       PDT_FAULT_POINT("vertex chunk");
       std::size_t first = verts.grow(vertex_chunk, is_small);
+      verts.populate(first, first + vertex_chunk);
       ctx.fresh_vertex = static_cast<std::uint32_t>(first);
       ctx.fresh_vertex_end = static_cast<std::uint32_t>(first + vertex_chunk);
     }

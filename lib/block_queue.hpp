@@ -30,6 +30,14 @@ class BlockQueue {
     prev->next.store(op, std::memory_order_release);
   }
 
+  // Consumer only: op goes before every queued record, so the next pop (by
+  // this holder or the block's next one) returns it. The producers touch
+  // only tail_ and the last record's link, never head_.
+  void push_front(OpRecord* op) {
+    op->next.store(head_, std::memory_order_relaxed);
+    head_ = op;
+  }
+
   // Consumer only. nullptr when empty (or a push is in progress).
   OpRecord* pop() {
     OpRecord* head = head_;

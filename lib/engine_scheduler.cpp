@@ -150,7 +150,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         case Verdict::carry_on: break;
       }
     }
-    if (run) count_in(*b, run);  // what is left of it, back in its block
+    if (run) count_in_front(*b, run);  // what is left of it, next in its block
     release(*b);
     // Work left behind while workers idle: let one take it (or another block
     // this worker then claims first). Without this, a worker that went idle
@@ -395,6 +395,13 @@ void EngineState::count_in(Block& b, OpRecord* op) {
   b.queued.fetch_add(1, std::memory_order_seq_cst);
   nonempty.mark(index_of(b));
   b.queue.push(op);
+}
+
+void EngineState::count_in_front(Block& b, OpRecord* op) {
+  assert(b.holder.load(std::memory_order_relaxed) >= 0);  // the consumer's side of the queue
+  b.queued.fetch_add(1, std::memory_order_seq_cst);
+  nonempty.mark(index_of(b));
+  b.queue.push_front(op);
 }
 
 void EngineState::enqueue(Block& b, OpRecord* op) {

@@ -38,6 +38,7 @@
 #include "pdt/io.hpp"
 #include "pdt/triangulation.hpp"
 #include "nonempty_blocks.hpp"     // the claim scan's bitmap, tested alone
+#include "spatial_order.hpp"       // the order an engine's insert_batch follows
 #include "partition.hpp"           // the recut test reads the blocks' cut
 #include "triangulation_impl.hpp"  // the contention test holds a vertex lock itself
 
@@ -862,6 +863,37 @@ TEST_CASE("engine: insert_batch gives CGAL's triangulation; tickets follow the b
     require_valid(t);
     require_same_as_cgal(t, pts);
   }
+}
+
+TEST_CASE("engine: one worker inserts a batch in its spatial order, a run not cut into slices", "[engine][tsan]") {
+  // A worker serves up to 64 operations per claim of a block; a run of an
+  // insert_batch (up to 256 points) it has not finished goes back to the
+  // front of the block, so the next claim goes on with it. Fresh vertex ids
+  // are handed out in increasing order (one worker, one pool), so along the
+  // batch's spatial order they must increase: a remainder sent to the back
+  // would interleave the block's runs in slices of 64 (ids falling at each
+  // run's end).
+  const std::vector<Point3> pts = random_points(scaled(5000, 2000), 96);
+  pdt::EngineOptions o = options_with(1);
+  o.blocks_per_axis = 1;  // every run in one block
+  pdt::Triangulation t;
+  std::vector<pdt::InsertResult> results(pts.size());
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
+    const pdt::Engine::Ticket first = e.insert_batch(pts);
+    e.drain();
+    for (std::size_t i = 0; i < pts.size(); ++i) results[i] = e.insertion_result(first + i);
+  });
+  const std::vector<std::uint32_t> order = pdt::detail::spatial_order(pts, true);  // the engine's
+  std::size_t falls = 0;
+  for (std::size_t k = 1; k < order.size(); ++k) {
+    REQUIRE(results[order[k]].inserted);
+    falls += results[order[k]].vertex < results[order[k - 1]].vertex;
+  }
+  CHECK(falls == 0);
+  require_valid(t);
+  require_same_as_cgal(t, pts);
 }
 
 TEST_CASE("engine: a ticket is released once its vertex is removed by id or handle", "[engine]") {

@@ -27,8 +27,12 @@
 //           the domain), in a tbb::task_arena(T): insert(first, last) as one
 //           batch (CGAL spatially sorts the batch first, inside the timing),
 //           then remove(first, beyond) of the same first F*N vertices as a batch.
-// Every configuration lives in its own scope and is freed (and malloc_trim'd)
-// before the next one. Every final triangulation must have the same numbers of
+// Every configuration runs in a process of its own (fork; bench/common/child.hpp),
+// started from the parent, which only generates the points and prints: in one
+// process a configuration found pages the ones before it had faulted in and
+// freed (1M normal points, pdt's batch with 2 workers: 1.36x its 1-worker
+// speed there, 2.0x alone). Its peak resident memory is its own too (the
+// "peak MiB" rows). Every final triangulation must have the same numbers of
 // finite cells and vertices as CGAL's sequential one, and no pdt operation may
 // fail (the timed loops pass a callback that only counts OpResult errors):
 // MISMATCH is printed and the exit status is 1 otherwise.
@@ -55,6 +59,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <mutex>
 #include <string>
@@ -63,6 +68,7 @@
 
 #include "common/bench_util.hpp"
 #include "common/cgal_runners.hpp"
+#include "common/child.hpp"
 #include "common/report.hpp"
 #include "common/watchdog.hpp"
 #include "pdt/engine.hpp"
@@ -131,13 +137,9 @@ Options parse(int argc, char** argv) {
   return o;
 }
 
-Watchdog* watchdog = nullptr;  // set by main
 double config_timeout = 0;
-
-// Arms the watchdog for the duration of one configuration.
-struct Guard : WatchdogGuard {
-  Guard(const std::string& what, double seconds) : WatchdogGuard(watchdog, what, seconds) {}
-};
+std::size_t tbb_parallelism = 0;  // set by main: what each configuration's process allows oneTBB
+double largest_peak_kib = 0;      // the largest configuration process's peak resident memory
 constexpr double extreme_run_timeout = 120;
 
 // ---- measurements ---------------------------------------------------------------
@@ -225,7 +227,63 @@ struct Result {
   double bytes_per_tet = 0;  // pdt: memory_bytes() / number_of_cells() after the insertions
   Shape shape;
   std::string first_error;  // pdt: the first failed operation's message
+  double peak_mib = 0;      // the configuration's process: peak resident memory
 };
+
+// A Result as plain bytes, to cross the pipe from a configuration's process.
+struct WireResult {
+  char impl[32] = {};
+  unsigned threads = 1, blocks = 0;
+  Phase ins, rem, mixed;
+  double bytes_per_tet = 0;
+  Shape shape;
+  char first_error[256] = {};
+};
+
+// Runs fn() -> Result in a process of its own, under a watchdog of `timeout`
+// seconds (0: none) started there: past it the process prints HANG and exits
+// 3, and so does this one. The parent starts no thread (no oneTBB, no
+// watchdog): fork copies only the calling thread.
+template <class Fn>
+Result isolated(const std::string& what, double timeout, Fn fn) {
+  WireResult w;
+  const ChildStatus st = in_child(
+      [&] {
+        tbb::global_control gc(tbb::global_control::max_allowed_parallelism, tbb_parallelism);
+        Watchdog dog;
+        WatchdogGuard guard(&dog, what, timeout);
+        const Result r = fn();
+        WireResult out;
+        std::snprintf(out.impl, sizeof out.impl, "%s", r.impl.c_str());
+        out.threads = r.threads;
+        out.blocks = r.blocks;
+        out.ins = r.ins;
+        out.rem = r.rem;
+        out.mixed = r.mixed;
+        out.bytes_per_tet = r.bytes_per_tet;
+        out.shape = r.shape;
+        std::snprintf(out.first_error, sizeof out.first_error, "%s", r.first_error.c_str());
+        return out;
+      },
+      w);
+  if (!st.ok) {
+    if (st.error.find("exit status 3") != std::string::npos) std::exit(3);  // the child printed HANG
+    throw pdt::Error(pdt::ErrorCode::io_failure, what + ": " + st.error);
+  }
+  Result r;
+  r.impl = w.impl;
+  r.threads = w.threads;
+  r.blocks = w.blocks;
+  r.ins = w.ins;
+  r.rem = w.rem;
+  r.mixed = w.mixed;
+  r.bytes_per_tet = w.bytes_per_tet;
+  r.shape = w.shape;
+  r.first_error = w.first_error;
+  r.peak_mib = double(st.peak_kib) / 1024.0;
+  largest_peak_kib = std::max(largest_peak_kib, double(st.peak_kib));
+  return r;
+}
 
 // How the engine balances its load (issue 11): stealing and recuts (the
 // default), stealing only, or the paper's static partition.
@@ -240,7 +298,6 @@ Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body
   Result r;
   r.impl = impl;
   r.threads = threads;
-  settle();
   {
     pdt::Triangulation t;
     tbb::task_arena arena(static_cast<int>(threads));
@@ -258,7 +315,6 @@ Result with_engine(const char* impl, const pdt::Box& box, unsigned threads, Body
     r.shape.finite_cells = t.number_of_finite_cells();
     r.shape.vertices = t.number_of_vertices();
   }
-  settle();
   return r;
 }
 
@@ -429,26 +485,23 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   const std::vector<char> cgal_removes = last_removals(pts, n_remove);
 
   progress("[%s] CGAL sequential...\n", name.c_str());
-  const Result seq = [&] {
-    Guard g(name + ": CGAL sequential", config_timeout);
+  const Result seq = isolated(name + ": CGAL sequential", config_timeout, [&] {
     return from_cgal("cgal_seq", 1, cgal_sequential(pts, cgal_removes), pts.size(), n_remove);
-  }();
+  });
   std::vector<Result> mine, batch, par;
   for (unsigned t : o.threads) {
+    const std::string with = " with " + std::to_string(t) + " thread(s)";
     progress("[%s] pdt, %u thread(s)...\n", name.c_str(), t);
-    {
-      Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
-      mine.push_back(run_pdt(pts, box, n_remove, t, false));
-    }
+    mine.push_back(isolated(name + ": pdt" + with, config_timeout,
+                            [&] { return run_pdt(pts, box, n_remove, t, false); }));
     progress("[%s] pdt batch, %u thread(s)...\n", name.c_str(), t);
-    {
-      Guard g(name + ": pdt batch with " + std::to_string(t) + " thread(s)", config_timeout);
-      batch.push_back(run_pdt(pts, box, n_remove, t, true));
-    }
+    batch.push_back(isolated(name + ": pdt batch" + with, config_timeout,
+                             [&] { return run_pdt(pts, box, n_remove, t, true); }));
     if (o.cgal_parallel) {
       progress("[%s] CGAL parallel, %u thread(s)...\n", name.c_str(), t);
-      Guard g(name + ": CGAL parallel with " + std::to_string(t) + " thread(s)", config_timeout);
-      par.push_back(from_cgal("cgal_par", t, cgal_parallel(pts, box, cgal_removes, t), pts.size(), n_remove));
+      par.push_back(isolated(name + ": CGAL parallel" + with, config_timeout, [&] {
+        return from_cgal("cgal_par", t, cgal_parallel(pts, box, cgal_removes, t), pts.size(), n_remove);
+      }));
     }
   }
 
@@ -497,6 +550,10 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   }
   row("pdt bytes/tet (after insertions)",
       [&](int ph, std::size_t i) { return ph == 0 ? fmt("%.1f", mine[i].bytes_per_tet) : "-"; });
+  row("Peak MiB: pdt / pdt batch",
+      [&](int ph, std::size_t i) { return ph == 0 ? fmt("%.0f", mine[i].peak_mib) + " / " + fmt("%.0f", batch[i].peak_mib) : "-"; });
+  if (o.cgal_parallel)
+    row("Peak MiB: CGAL parallel", [&](int ph, std::size_t i) { return ph == 0 ? fmt("%.0f", par[i].peak_mib) : "-"; });
   tab.print();
   std::printf("  blocks per axis:");
   for (const auto& r : mine) std::printf(" %u (T=%u)", r.blocks, r.threads);
@@ -509,7 +566,8 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
     bad += !check("pdt batch", r.threads, r.shape, seq.shape) + !check_errors("pdt batch", r);
   for (const auto& r : par) bad += !check("CGAL parallel", r.threads, r.shape, seq.shape);
   std::printf("  check: %s\n", bad ? "MISMATCH (see above)" : "every final triangulation has CGAL seq's cell and vertex counts");
-  std::printf("  peak RSS so far: %.1f MiB\n", mib(double(pdt::support::peak_rss_bytes())));
+  std::printf("  peak MiB of CGAL seq's process: %.0f (each configuration runs in a process of its own)\n",
+              seq.peak_mib);
 
   for (std::size_t i = 0; i < nt; ++i) {
     const double p0 = o.cgal_parallel ? par[i].ins.seconds : 0, p1 = o.cgal_parallel ? par[i].rem.seconds : 0;
@@ -534,7 +592,9 @@ int extreme_table(const Options& o, Csv& csv) {
   std::vector<unsigned> ts{1};
   if (tmax > 1) ts.push_back(tmax);
   progress("[extreme] CGAL sequential...\n");
-  const Result seq = from_cgal("cgal_seq", 1, cgal_sequential(pts, last_removals(pts, pts.size())), pts.size(), pts.size());
+  const Result seq = isolated("extreme case: CGAL sequential", config_timeout, [&] {
+    return from_cgal("cgal_seq", 1, cgal_sequential(pts, last_removals(pts, pts.size())), pts.size(), pts.size());
+  });
   progress("[extreme] pdt, %zu points, threads 1 and %u, %d runs each...\n", pts.size(), tmax, extreme_repeats);
 
   // Per thread count: median time of each phase; rollback ratio: the worst run.
@@ -545,8 +605,8 @@ int extreme_table(const Options& o, Csv& csv) {
     std::vector<Result> runs;
     for (int k = 0; k < extreme_repeats; ++k) {
       const double limit = config_timeout > 0 ? std::min(config_timeout, extreme_run_timeout) : 0;
-      Guard g("extreme case: pdt with " + std::to_string(t) + " thread(s), run " + std::to_string(k + 1), limit);
-      runs.push_back(run_pdt(pts, box, pts.size(), t, false));
+      runs.push_back(isolated("extreme case: pdt with " + std::to_string(t) + " thread(s), run " + std::to_string(k + 1),
+                              limit, [&] { return run_pdt(pts, box, pts.size(), t, false); }));
     }
     Result agg = runs[0];
     auto median = [&](auto get) {
@@ -640,15 +700,14 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   const pdt::OpStream s = interleaved_stream(o, dist);
 
   progress("[%s interleaved] CGAL sequential...\n", name.c_str());
-  const Result seq = [&] {
-    Guard g(name + " interleaved: CGAL sequential", config_timeout);
+  const Result seq = isolated(name + " interleaved: CGAL sequential", config_timeout, [&] {
     return from_cgal("cgal_seq", 1, cgal_sequential_stream(s), s.insert_count(), s.remove_count(), true);
-  }();
+  });
   std::vector<Result> mine;
   for (unsigned t : o.threads) {
     progress("[%s interleaved] pdt, %u thread(s)...\n", name.c_str(), t);
-    Guard g(name + " interleaved: pdt with " + std::to_string(t) + " thread(s)", config_timeout);
-    mine.push_back(run_pdt_stream(s, t));
+    mine.push_back(isolated(name + " interleaved: pdt with " + std::to_string(t) + " thread(s)", config_timeout,
+                            [&] { return run_pdt_stream(s, t); }));
   }
 
   std::printf("\n== %s interleaved: %zu insertions and %zu removals mixed (RemovalOrder::interleaved) ==\n",
@@ -686,18 +745,17 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
 // with stealing and recuts (the default), stealing only, and neither.
 int skewed_table(const Options& o, const std::string& name, const pdt::OpStream& s, Csv& csv) {
   progress("[%s] CGAL sequential...\n", name.c_str());
-  const Result seq = [&] {
-    Guard g(name + ": CGAL sequential", config_timeout);
+  const Result seq = isolated(name + ": CGAL sequential", config_timeout, [&] {
     return from_cgal("cgal_seq", 1, cgal_sequential_stream(s), s.insert_count(), s.remove_count(), true);
-  }();
+  });
   const Balance modes[3] = {Balance::recut, Balance::steal, Balance::none};
   const char* mode_names[3] = {"stealing + recuts", "stealing only", "neither"};
   std::vector<Result> runs[3];
   for (unsigned t : o.threads) {
     for (int m = 0; m < 3; ++m) {
       progress("[%s] pdt, %u thread(s), %s...\n", name.c_str(), t, mode_names[m]);
-      Guard g(name + ": pdt with " + std::to_string(t) + " thread(s)", config_timeout);
-      runs[m].push_back(run_pdt_stream(s, t, modes[m]));
+      runs[m].push_back(isolated(name + ": pdt with " + std::to_string(t) + " thread(s), " + mode_names[m],
+                                 config_timeout, [&] { return run_pdt_stream(s, t, modes[m]); }));
     }
   }
   std::printf("\n== skewed %s: %zu insertions and %zu removals, one mixed phase ==\n", name.c_str(),
@@ -763,11 +821,9 @@ int main(int argc, char** argv) {
   const unsigned tmax = *std::max_element(o.threads.begin(), o.threads.end());
   const int cpus = affinity_cpus();
   // Let an arena of tmax really get tmax threads, even beyond the core count
-  // (oneTBB's default cap is the hardware concurrency).
-  const std::size_t parallelism = std::max<std::size_t>(tmax, std::thread::hardware_concurrency());
-  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, parallelism);
-  Watchdog dog;
-  watchdog = &dog;
+  // (oneTBB's default cap is the hardware concurrency); set in each
+  // configuration's process (isolated), where the threads start.
+  tbb_parallelism = std::max<std::size_t>(tmax, std::thread::hardware_concurrency());
   config_timeout = o.timeout;
 
   std::printf("bench_parallel: %llu points, threads", static_cast<unsigned long long>(o.points));
@@ -785,6 +841,7 @@ int main(int argc, char** argv) {
     std::printf("CGAL parallel: Parallel_tag TDS + Spatial_lock_grid_3<Tag_priority_blocking> (%d cells/axis), "
                 "insert(range) (spatially sorted by CGAL, sort timed), remove(range), in tbb::task_arena(T)\n",
                 lock_grid_cells_per_axis);
+  std::printf("Each configuration runs in a process of its own (its pages and its peak memory are its own).\n");
   if (cpus > 0 && tmax > static_cast<unsigned>(cpus))
     std::printf("note: %u threads asked for but only %d CPUs available: those runs are oversubscribed\n", tmax, cpus);
   std::fflush(stdout);
@@ -804,7 +861,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
     return 2;
   }
-  std::printf("\npeak RSS: %.1f MiB\n", mib(double(pdt::support::peak_rss_bytes())));
+  std::printf("\npeak RSS of the largest configuration's process: %.1f MiB\n", largest_peak_kib / 1024.0);
   if (mismatches)
     std::printf("\n%d MISMATCH(ES): a final triangulation differs from CGAL's, or pdt operations failed\n", mismatches);
   return mismatches ? 1 : 0;

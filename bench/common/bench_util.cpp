@@ -175,6 +175,7 @@ int affinity_cpus() {
 }
 
 void progress(const char* fmt, ...) {
+  std::fflush(stdout);  // what was printed before comes first when both go to one file
   va_list ap;
   va_start(ap, fmt);
   std::vfprintf(stderr, fmt, ap);

@@ -45,7 +45,7 @@ const char* const run_usage =
     "                  variables (see README); --threads sets the workers, not PDT_WORKERS\n"
     "  --in-order      point files: insert in file order, one point at a time\n"
     "  --in-flight N   engine: at most N operations submitted and not yet done (default\n"
-    "                  4096 per worker); the reader waits (back-pressure)\n"
+    "                  65536, or 4096 per worker if more); the reader waits (back-pressure)\n"
     "  --out FILE      write the final mesh: FILE.node (TetGen .node + .ele) or FILE.vtu\n"
     "                  (VTK, binary, zlib-compressed; --vtu-ascii for text)\n"
     "  --vtu-ascii     write .vtu as ASCII text\n"
@@ -417,7 +417,9 @@ int cmd_run(Args args) {
     usage_error(run_usage, "--vtu-ascii applies to a .vtu output; give --out FILE.vtu (or drop --vtu-ascii)");
   if (in_order && !is_point_file(*input))
     usage_error(run_usage, "--in-order applies to point files; an operation stream is always replayed in its order");
-  if (!in_flight) in_flight = 4096 * std::max(1u, workers);
+  // The window is what the blocks can reorder: with 4,096 operations per worker, 1M random
+  // points on 1 worker took 6.2 s, with 65,536 4.3 s (the batch: 3.0 s), for 14 MB more.
+  if (!in_flight) in_flight = std::max<std::uint64_t>(65536, std::uint64_t{4096} * std::max(1u, workers));
 
   pdt::Triangulation t;
   ReplayStats st;

@@ -142,8 +142,11 @@ class StableArray {
   static constexpr std::size_t chunk_elems = std::size_t{1} << chunk_bits;
 
  public:
-  explicit StableArray(std::size_t max_elements, bool /*huge_pages: mimalloc's choice*/ = false)
+  // huge_pages: mimalloc's choice; PDT_HUGE_PAGES is still checked, so that a
+  // bad value is refused in both builds alike.
+  explicit StableArray(std::size_t max_elements, bool huge_pages = false)
       : capacity_(max_elements), table_size_((max_elements + chunk_elems - 1) / chunk_elems) {
+    if (huge_pages) (void)huge_pages_advised();  // may throw: before the mapping
     // The table itself is reserved like the pool build's storage: untouched
     // entries cost nothing and read as null.
     void* p = ::mmap(nullptr, table_bytes(), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);

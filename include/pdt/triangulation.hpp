@@ -106,6 +106,9 @@ struct TriangulationStats {
 
 class Triangulation {
  public:
+  // Throws pdt::Error (invalid_argument) if PDT_HUGE_PAGES is set to anything
+  // but 0 or 1 (README, Design, Huge pages), std::bad_alloc if the address
+  // space for its arrays cannot be reserved.
   Triangulation();
   // Destroying a triangulation while an engine is attached to it breaks the
   // rule that it outlives its engine: the process stops (std::abort) with a

@@ -219,24 +219,26 @@ Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double
   return p;
 }
 
-struct Result {
-  std::string impl;  // pdt, cgal_seq, cgal_par
+// What a configuration measured: plain data, so that it crosses the pipe from
+// the configuration's process as bytes (isolated).
+struct Measured {
   unsigned threads = 1;
   unsigned blocks = 0;  // pdt: blocks per axis
   Phase ins, rem, mixed;
   double bytes_per_tet = 0;  // pdt: memory_bytes() / number_of_cells() after the insertions
   Shape shape;
+};
+
+struct Result : Measured {
+  std::string impl;         // pdt, cgal_seq, cgal_par
   std::string first_error;  // pdt: the first failed operation's message
   double peak_mib = 0;      // the configuration's process: peak resident memory
 };
 
 // A Result as plain bytes, to cross the pipe from a configuration's process.
 struct WireResult {
+  Measured measured;
   char impl[32] = {};
-  unsigned threads = 1, blocks = 0;
-  Phase ins, rem, mixed;
-  double bytes_per_tet = 0;
-  Shape shape;
   char first_error[256] = {};
 };
 
@@ -254,31 +256,17 @@ Result isolated(const std::string& what, double timeout, Fn fn) {
         WatchdogGuard guard(&dog, what, timeout);
         const Result r = fn();
         WireResult out;
+        out.measured = r;
         std::snprintf(out.impl, sizeof out.impl, "%s", r.impl.c_str());
-        out.threads = r.threads;
-        out.blocks = r.blocks;
-        out.ins = r.ins;
-        out.rem = r.rem;
-        out.mixed = r.mixed;
-        out.bytes_per_tet = r.bytes_per_tet;
-        out.shape = r.shape;
         std::snprintf(out.first_error, sizeof out.first_error, "%s", r.first_error.c_str());
         return out;
       },
       w);
-  if (!st.ok) {
-    if (st.error.find("exit status 3") != std::string::npos) std::exit(3);  // the child printed HANG
-    throw pdt::Error(pdt::ErrorCode::io_failure, what + ": " + st.error);
-  }
+  if (st.exit_code == 3) std::exit(3);  // the child's watchdog printed HANG
+  if (!st.ok) throw pdt::Error(pdt::ErrorCode::io_failure, what + ": " + st.error);
   Result r;
+  static_cast<Measured&>(r) = w.measured;
   r.impl = w.impl;
-  r.threads = w.threads;
-  r.blocks = w.blocks;
-  r.ins = w.ins;
-  r.rem = w.rem;
-  r.mixed = w.mixed;
-  r.bytes_per_tet = w.bytes_per_tet;
-  r.shape = w.shape;
   r.first_error = w.first_error;
   r.peak_mib = double(st.peak_kib) / 1024.0;
   largest_peak_kib = std::max(largest_peak_kib, double(st.peak_kib));

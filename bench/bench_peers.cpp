@@ -382,6 +382,7 @@ int main(int argc, char** argv) {
           runs[i].push_back(out);
         else
           errors[i] = st.error;
+        if (st.exit_code == 3) hang = 1;  // its watchdog printed HANG
       }
 
     std::vector<Summary> rows;
@@ -410,7 +411,6 @@ int main(int argc, char** argv) {
     for (const Summary& s : rows) {
       if (!s.ok) {
         std::printf("%-18s FAILED: %s\n", s.config.label().c_str(), s.error.c_str());
-        if (s.error.find("exit status 3") != std::string::npos) hang = 1;
         ++bad;
         continue;
       }

@@ -75,6 +75,7 @@ ChildStatus run_in_child(const std::function<void(void* out)>& body, void* out, 
   wait4(pid, &status, 0, &ru);
   ChildStatus st;
   st.peak_kib = ru.ru_maxrss;
+  if (WIFEXITED(status)) st.exit_code = WEXITSTATUS(status);
   if (!got || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     char why[128];
     if (WIFSIGNALED(status))

@@ -17,6 +17,7 @@ struct ChildStatus {
   bool ok = false;
   std::string error;  // why not ok: the exception the child threw, or how it died
   long peak_kib = 0;  // the child's peak resident memory (getrusage of the child)
+  int exit_code = -1;  // the child's exit status if it exited (3: its watchdog saw a HANG), else -1
 };
 
 // Runs body in a child. body writes its result (size bytes) to *out in the

@@ -10,8 +10,11 @@
 #include <CGAL/spatial_sort.h>
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/parallel_sort.h>
+#include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
+#include <cassert>
+#include <memory>
 #include <numeric>
 #include <utility>
 
@@ -83,11 +86,69 @@ std::uint64_t hilbert_key(std::uint32_t x[3]) {
   return spread3(x[0]) << 2 | spread3(x[1]) << 1 | spread3(x[2]);
 }
 
+// hilbert_key for four lattice points at once, one per lane: the same
+// operations lane by lane, so each lane's key is the scalar one (checked in
+// debug builds). x[a] holds axis a of the four points.
+using Lanes4u = std::uint32_t __attribute__((vector_size(16)));
+
+void hilbert_keys4(Lanes4u x[3], std::uint64_t out[4]) {
+  for (std::uint32_t q = 1u << (key_bits - 1); q > 1; q >>= 1) {
+    const std::uint32_t p = q - 1;
+    for (int i = 0; i < 3; ++i) {
+      const Lanes4u set = (Lanes4u)((x[i] & q) != 0);  // all ones where bit q of x[i] is set
+      const Lanes4u t = (x[0] ^ x[i]) & p & ~set;
+      x[0] ^= (p & set) | t;
+      x[i] ^= t;
+    }
+  }
+  x[1] ^= x[0];
+  x[2] ^= x[1];
+  Lanes4u t = {0, 0, 0, 0};
+  for (std::uint32_t q = 1u << (key_bits - 1); q > 1; q >>= 1) t ^= (q - 1) & (Lanes4u)((x[2] & q) != 0);
+  for (int i = 0; i < 3; ++i) x[i] ^= t;
+  for (int k = 0; k < 4; ++k) out[k] = spread3(x[0][k]) << 2 | spread3(x[1][k]) << 1 | spread3(x[2][k]);
+}
+
 struct Keyed {
   std::uint64_t key;
   std::uint32_t index;
   bool operator<(const Keyed& o) const { return key < o.key || (key == o.key && index < o.index); }
 };
+
+// Sorts a[0, n) by (key, index), as std::sort with Keyed's operator< would:
+// a least-significant-digit radix sort on the key (stable, 11 bits a pass,
+// a pass skipped when every key has the same digit there), then each run of
+// equal keys (copies of a point, or points closer than the key's
+// resolution: rare) by index. scratch: room for n items.
+void radix_sort(Keyed* a, std::size_t n, Keyed* scratch) {
+  if (n < 256) {
+    std::sort(a, a + n);
+    return;
+  }
+  constexpr int digit_bits = 11, passes = (3 * key_bits + digit_bits - 1) / digit_bits;
+  constexpr std::size_t digits = std::size_t{1} << digit_bits;
+  std::vector<std::uint32_t> count(passes * digits, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int p = 0; p < passes; ++p) ++count[p * digits + ((a[i].key >> (p * digit_bits)) & (digits - 1))];
+  Keyed* from = a;
+  Keyed* to = scratch;
+  for (int p = 0; p < passes; ++p) {
+    std::uint32_t* offset = count.data() + p * digits;
+    if (offset[(a[0].key >> (p * digit_bits)) & (digits - 1)] == n) continue;  // one digit: nothing moves
+    std::uint32_t sum = 0;
+    for (std::size_t d = 0; d < digits; ++d) sum += std::exchange(offset[d], sum);
+    for (std::size_t i = 0; i < n; ++i) to[offset[(from[i].key >> (p * digit_bits)) & (digits - 1)]++] = from[i];
+    std::swap(from, to);
+  }
+  if (from != a) std::copy(from, from + n, a);
+  for (std::size_t i = 0; i + 1 < n;) {
+    std::size_t j = i + 1;
+    while (j < n && a[j].key == a[i].key) ++j;
+    if (j - i > 1) std::sort(a + i, a + j);
+    i = j;
+  }
+  assert(std::is_sorted(a, a + n));
+}
 
 template <class Body>
 void for_range(std::size_t n, bool parallel, const Body& body) {
@@ -118,11 +179,31 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   // the cache at each one), then the shuffle: Fisher-Yates from a fixed seed,
   // so the order (and the vertex ids it hands out) is the same on every run.
   std::vector<Keyed> items(n);
+  auto lattice_point = [&](std::size_t i, std::uint32_t x[3]) {
+    const double c[3] = {points[i].x, points[i].y, points[i].z};
+    for (int a = 0; a < 3; ++a) x[a] = static_cast<std::uint32_t>(lattice.index(a, c[a]));
+  };
   for_range(n, parallel, [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) {
-      const double c[3] = {points[i].x, points[i].y, points[i].z};
+    std::size_t i = begin;
+    for (; i + 4 <= end; i += 4) {  // four at a time, in the lanes of a vector
+      std::uint32_t at[4][3];
+      for (int k = 0; k < 4; ++k) lattice_point(i + k, at[k]);
+      Lanes4u x[3];
+      for (int a = 0; a < 3; ++a) x[a] = Lanes4u{at[0][a], at[1][a], at[2][a], at[3][a]};
+      std::uint64_t keys[4];
+      hilbert_keys4(x, keys);
+      for (int k = 0; k < 4; ++k) {
+        items[i + k] = {keys[k], static_cast<std::uint32_t>(i + k)};
+#ifndef NDEBUG
+        std::uint32_t one[3];
+        lattice_point(i + k, one);
+        assert(hilbert_key(one) == keys[k]);
+#endif
+      }
+    }
+    for (; i < end; ++i) {
       std::uint32_t x[3];
-      for (int a = 0; a < 3; ++a) x[a] = static_cast<std::uint32_t>(lattice.index(a, c[a]));
+      lattice_point(i, x);
       items[i] = {hilbert_key(x), static_cast<std::uint32_t>(i)};
     }
   });
@@ -131,12 +212,18 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
     state = mix64(state + i);
     std::swap(items[i], items[state % (i + 1)]);
   }
+  // Each round sorted by (key, index): with several threads by TBB's sort;
+  // on one, by radix_sort. The same order either way. (1M uniform points,
+  // one thread: keys in vector lanes and radix_sort took the whole order from
+  // 0.17 to 0.085 s.)
+  const bool threads = parallel && tbb::this_task_arena::max_concurrency() > 1;
+  const std::unique_ptr<Keyed[]> scratch = std::make_unique_for_overwrite<Keyed[]>(threads ? 0 : n - n / 4);
   for (std::size_t end = n; end > 0;) {
     const std::size_t begin = end >= 16 ? end / 4 : 0;
-    if (parallel)
+    if (threads)
       tbb::parallel_sort(items.begin() + static_cast<std::ptrdiff_t>(begin), items.begin() + static_cast<std::ptrdiff_t>(end));
     else
-      std::sort(items.begin() + static_cast<std::ptrdiff_t>(begin), items.begin() + static_cast<std::ptrdiff_t>(end));
+      radix_sort(items.data() + begin, end - begin, scratch.get());
     end = begin;
   }
   // Keys too coarse for the points (a cluster far smaller than the box, or a

@@ -449,7 +449,10 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
       op->run_end = static_cast<std::uint32_t>(end);
       k = end;
     }
-    shared->first_ticket = e.tickets.issue(points.size());
+    e.tickets.sweep_if_large(e.impl.verts, static_cast<std::uint64_t>(std::max<std::int64_t>(0, e.impl.n_vertices.load())));
+    const detail::TicketTable::Issued issued = e.tickets.issue_ordered(shared->index);
+    shared->first_ticket = issued.first;
+    shared->ticket_range = issued.range;
   } catch (...) {
     for (OpRecord* op : runs)
       if (op) e.records.release(op);

@@ -16,7 +16,9 @@ namespace pdt::detail {
 OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp) {
   switch (op.kind) {
     case OpKind::insert: {
-      if (!op.only_if_alive) tickets.prefetch(op.ticket);  // finish_inserted's slot, fetched meanwhile
+      // finish_inserted's slot, fetched meanwhile (a batch's slots in a range
+      // are written in order: the hardware fetches those ahead).
+      if (!op.only_if_alive && !(op.batch_done && op.batch_done->ticket_range)) tickets.prefetch(op.ticket);
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
       const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);
@@ -160,8 +162,11 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
   r.rollbacks = op.rollbacks;
   if ((op.kind == OpKind::insert && !op.only_if_alive) || op.kind == OpKind::remove_insertion) r.ticket = op.ticket;
   if (op.kind == OpKind::insert && !op.only_if_alive) {
-    OpRecord* undo = r.error ? tickets.finish_failed(op.ticket, r.error)
-                             : tickets.finish_inserted(op.ticket, r.insert.vertex, r.insert.inserted, stamp);
+    const TicketPosition at = op.batch_done && op.batch_done->ticket_range
+                                  ? TicketPosition{op.batch_done->ticket_range, op.batch_pos}
+                                  : TicketPosition{};
+    OpRecord* undo = r.error ? tickets.finish_failed(op.ticket, r.error, at)
+                             : tickets.finish_inserted(op.ticket, r.insert.vertex, r.insert.inserted, stamp, at);
     if (undo) {
       undo->point = op.point;  // now known: where the vertex is
       undo->routed = true;

@@ -179,6 +179,7 @@ OpRecord* EngineState::take_from_run(Worker& w, OpRecord*& run) {
   one->from_batch = true;
   one->point = batch.points[k];
   one->ticket = batch.first_ticket + batch.index[k];
+  one->batch_pos = k;
   one->batch_done = run->batch_done;
   if (run->run_next == run->run_end) {
     records.release(run);

@@ -56,6 +56,7 @@ void OpRecordPool::release(OpRecord* op) {
   op->stamp = 0;
   op->vertex = no_vertex;
   op->run_next = op->run_end = 0;
+  op->batch_pos = 0;
   Shard& s = shards_[my_shard()];
   std::lock_guard lock(s.mutex);
   op->next.store(s.head, std::memory_order_relaxed);

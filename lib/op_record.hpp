@@ -13,6 +13,8 @@
 
 namespace pdt::detail {
 
+struct TicketRange;  // tickets.hpp
+
 // What the operations of a batch share: one callback, and for insert_batch
 // the points themselves, in insertion (spatial) order. Freed by the last
 // operation to complete.
@@ -22,6 +24,7 @@ struct BatchCallback {
   std::vector<Point3> points;          // insert_batch: in insertion order
   std::vector<std::uint32_t> index;    // points[k] is the caller's points[index[k]]: ticket first_ticket + index[k]
   std::uint64_t first_ticket = 0;
+  TicketRange* ticket_range = nullptr;  // insert_batch: its tickets' slots, if in a range (tickets.hpp)
 };
 
 struct OpRecord {
@@ -46,6 +49,9 @@ struct OpRecord {
   // a record of its own (`point` is then the next one's, for routing).
   // run_end == 0: not a run. Invariant: run_next < run_end while queued.
   std::uint32_t run_next = 0, run_end = 0;
+  // One insertion of an insert_batch: its position k in batch_done->points
+  // (its ticket's slot in batch_done->ticket_range, if there is one).
+  std::uint32_t batch_pos = 0;
 };
 
 // Records come in slabs and are recycled through free lists, one per shard

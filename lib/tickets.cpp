@@ -3,6 +3,7 @@
 
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <cassert>
 #include <cstdlib>
 #include <string>
@@ -97,6 +98,91 @@ void TicketTable::Shard::erase(Slot* s) {
 }
 
 // ---------------------------------------------------------------------------
+// The table: where a ticket's slot is
+// ---------------------------------------------------------------------------
+TicketTable::~TicketTable() {
+  for (TicketRange* r : ranges_) delete r;
+}
+
+TicketRange* TicketTable::range_of(std::uint64_t t) const {
+  // The last range starting at or before t, if t is in it.
+  auto it = std::upper_bound(ranges_.begin(), ranges_.end(), t,
+                             [](std::uint64_t x, const TicketRange* r) { return x < r->first; });
+  if (it == ranges_.begin()) return nullptr;
+  TicketRange* r = *(it - 1);
+  return t - r->first < r->n ? r : nullptr;
+}
+
+TicketTable::Slot* TicketTable::find(std::uint64_t t, TicketPosition at, TicketRange** range) {
+  if (at.range) {
+    assert(at.k < at.range->n && at.range->slots[at.k].key == t + 1 && range_of(t) == at.range);
+    if (range) *range = at.range;
+    return &at.range->slots[at.k];
+  }
+  if (TicketRange* r = range_of(t)) {
+    if (range) *range = r;
+    Slot& slot = r->slots[r->position[t - r->first]];
+    return slot.key == t + 1 ? &slot : nullptr;
+  }
+  return shard(t).find(t);
+}
+
+namespace {
+// A count written only under one mutex (the shard's), read without it.
+void decrement(std::atomic<std::uint32_t>& count) {
+  count.store(count.load(std::memory_order_relaxed) - 1, std::memory_order_relaxed);
+}
+}  // namespace
+
+std::uint64_t TicketTable::erase(std::uint64_t t, Slot* slot) {
+  live_.fetch_sub(1, std::memory_order_relaxed);
+  TicketRange* r = range_of(t);
+  if (!r) {
+    shard(t).erase(slot);
+    return no_range;
+  }
+  *slot = Slot{};
+  decrement(r->counts[t % shard_count].live);
+  return r->mostly_released() ? r->first : no_range;
+}
+
+void TicketTable::compact(std::uint64_t first) {
+  if (first == no_range) return;
+  std::lock_guard issuing(issue_mutex_);
+  std::unique_lock<std::mutex> locks[shard_count];
+  for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+  TicketRange* r = range_of(first);
+  if (!r || r->first != first || !r->mostly_released()) return;  // gone, or no longer worth it
+  std::size_t per_shard[shard_count] = {};
+  for (std::uint32_t k = 0; k < r->n; ++k)
+    if (const std::uint64_t key = r->slots[k].key) ++per_shard[(key - 1) % shard_count];
+  try {
+    for (unsigned j = 0; j < shard_count; ++j) shards_[j].reserve(shards_[j].count + per_shard[j]);
+  } catch (const std::bad_alloc&) {
+    return;  // the range stays, and serves as before
+  }
+  // Nothing below fails: the shards have room, and erasing from a vector
+  // does not allocate.
+  for (std::uint32_t k = 0; k < r->n; ++k) {
+    const Slot& slot = r->slots[k];
+    if (slot.key == 0) continue;
+    Shard& s = shard(slot.key - 1);
+    s.insert(slot.key - 1);
+    *s.find(slot.key - 1) = slot;
+  }
+  ranges_.erase(std::find(ranges_.begin(), ranges_.end(), r));
+  for (auto& lock : locks) lock.unlock();
+  delete r;
+}
+
+std::size_t TicketTable::ranged() const {
+  std::lock_guard lock(shards_[0].mutex);
+  std::size_t n = 0;
+  for (const TicketRange* r : ranges_) n += r->n;
+  return n;
+}
+
+// ---------------------------------------------------------------------------
 // The table
 // ---------------------------------------------------------------------------
 void TicketTable::unknown(std::uint64_t t, const char* why) {
@@ -134,38 +220,80 @@ std::uint64_t TicketTable::issue(std::uint64_t n) {
   return first;
 }
 
+TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> order) {
+  const std::size_t n = order.size();
+  if (n < range_min) return {issue(n), nullptr};
+  PDT_FAULT_POINT("ticket range");
+  auto r = std::make_unique<TicketRange>();
+  r->n = static_cast<std::uint32_t>(n);
+  r->slots = std::make_unique<Slot[]>(n);
+  r->position = std::make_unique_for_overwrite<std::uint32_t[]>(n);
+  std::lock_guard issuing(issue_mutex_);
+  const std::uint64_t first = next_.load(std::memory_order_relaxed);
+  r->first = first;
+  for (std::uint32_t k = 0; k < n; ++k) {
+    r->slots[k].key = first + order[k] + 1;
+    r->position[order[k]] = k;
+  }
+  for (unsigned j = 0; j < shard_count; ++j) {  // how many t in [first, first + n) have t % 16 == j
+    const std::uint64_t from = first + (j + shard_count - first % shard_count) % shard_count;
+    const auto count = static_cast<std::uint32_t>(from < first + n ? (first + n - from + shard_count - 1) / shard_count : 0);
+    r->counts[j].live.store(count, std::memory_order_relaxed);
+    r->counts[j].pending.store(count, std::memory_order_relaxed);
+  }
+  assert(r->live_now() == n);
+  TicketRange* range = r.get();
+  {
+    std::unique_lock<std::mutex> locks[shard_count];  // readers hold one: hold them all
+    for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+    ranges_.push_back(range);  // may throw: nothing issued yet. The largest first: still sorted
+    r.release();
+  }
+  live_.fetch_add(n, std::memory_order_relaxed);
+  next_.store(first + n, std::memory_order_release);
+  return {first, range};
+}
+
 TicketView TicketTable::claim_undo(std::uint64_t t, const StableArray<VertexRec>& verts) {
   if (t >= next_.load(std::memory_order_acquire)) unknown(t, "no such insertion was submitted");
-  Shard& s = shard(t);
-  std::lock_guard lock(s.mutex);
-  Slot* slot = s.find(t);
-  if (!slot) unknown(t, "it was already undone, or its vertex was removed meanwhile");
-  if (slot->undone) unknown(t, "it was already undone");
-  if (slot->state == TicketState::failed) {
-    s.errors.erase(t);
-    s.erase(slot);
-    live_.fetch_sub(1, std::memory_order_relaxed);
-    unknown(t, "that insertion failed");
+  const char* why = nullptr;
+  std::uint64_t to_compact = no_range;
+  TicketView view;
+  {
+    Shard& s = shard(t);
+    std::lock_guard lock(s.mutex);
+    Slot* slot = find(t);
+    if (!slot) {
+      why = "it was already undone, or its vertex was removed meanwhile";
+    } else if (slot->undone) {
+      why = "it was already undone";
+    } else if (slot->state == TicketState::failed) {
+      s.errors.erase(t);
+      to_compact = erase(t, slot);
+      why = "that insertion failed";
+    } else if (vertex_gone(*slot, verts)) {
+      to_compact = erase(t, slot);
+      why = "its vertex was removed meanwhile (by handle or id)";
+    } else {
+      slot->undone = true;
+      view = {slot->state, slot->vertex, slot->stamp};
+    }
   }
-  if (vertex_gone(*slot, verts)) {
-    s.erase(slot);
-    live_.fetch_sub(1, std::memory_order_relaxed);
-    unknown(t, "its vertex was removed meanwhile (by handle or id)");
-  }
-  slot->undone = true;
-  return {slot->state, slot->vertex, slot->stamp};
+  compact(to_compact);
+  if (why) unknown(t, why);
+  return view;
 }
 
 void TicketTable::unclaim_undo(std::uint64_t t) {
   Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  if (Slot* slot = s.find(t)) slot->undone = false;
+  if (Slot* slot = find(t)) slot->undone = false;
 }
 
 TicketView TicketTable::view(std::uint64_t t) const {
   const Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  const Slot* slot = s.find(t);
+  const Slot* slot = find(t);
   if (!slot) return {TicketState::failed, no_vertex, 0};
   return {slot->state, slot->vertex, slot->stamp};
 }
@@ -173,16 +301,19 @@ TicketView TicketTable::view(std::uint64_t t) const {
 OpRecord* TicketTable::park(std::uint64_t t, OpRecord* undo) {
   Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  Slot* slot = s.find(t);
+  Slot* slot = find(t);
   if (!slot || slot->state != TicketState::pending) return undo;  // done meanwhile: run it now
   slot->parked = undo;
   return nullptr;
 }
 
-OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp) {
+OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp,
+                                       TicketPosition at) {
   Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  Slot* slot = s.find(t);
+  TicketRange* range = nullptr;
+  Slot* slot = find(t, at, &range);
+  if (range) decrement(range->counts[t % shard_count].pending);
   slot->state = TicketState::inserted;
   slot->vertex = v;
   slot->inserted = inserted;
@@ -192,10 +323,12 @@ OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserte
   return undo;
 }
 
-OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error) {
+OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error, TicketPosition at) {
   Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  Slot* slot = s.find(t);
+  TicketRange* range = nullptr;
+  Slot* slot = find(t, at, &range);
+  if (range) decrement(range->counts[t % shard_count].pending);
   slot->state = TicketState::failed;
   OpRecord* undo = slot->parked;
   slot->parked = nullptr;
@@ -208,13 +341,16 @@ OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error) 
 }
 
 void TicketTable::release(std::uint64_t t) {
-  Shard& s = shard(t);
-  std::lock_guard lock(s.mutex);
-  if (Slot* slot = s.find(t)) {
-    s.errors.erase(t);
-    s.erase(slot);
-    live_.fetch_sub(1, std::memory_order_relaxed);
+  std::uint64_t to_compact = no_range;
+  {
+    Shard& s = shard(t);
+    std::lock_guard lock(s.mutex);
+    if (Slot* slot = find(t)) {
+      s.errors.erase(t);
+      to_compact = erase(t, slot);
+    }
   }
+  compact(to_compact);
 }
 
 InsertResult TicketTable::result(std::uint64_t t, const StableArray<VertexRec>& verts) const {
@@ -222,7 +358,7 @@ InsertResult TicketTable::result(std::uint64_t t, const StableArray<VertexRec>& 
     throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) + " was never submitted");
   const Shard& s = shard(t);
   std::lock_guard lock(s.mutex);
-  const Slot* slot = s.find(t);
+  const Slot* slot = find(t);
   if (!slot || (!slot->undone && vertex_gone(*slot, verts)))
     throw Error(ErrorCode::invalid_argument, "insertion " + std::to_string(t) +
                                                  " was released: it was undone, or its vertex was removed");
@@ -242,22 +378,43 @@ InsertResult TicketTable::result(std::uint64_t t, const StableArray<VertexRec>& 
 void TicketTable::sweep_if_large(const StableArray<VertexRec>& verts, std::uint64_t live_vertices) {
   const std::uint64_t live_now = live_.load(std::memory_order_relaxed);
   if (live_now < sweep_at_.load(std::memory_order_relaxed)) return;
+  // A done insertion whose vertex incarnation is gone can no longer be
+  // undone by ticket (an undo claimed for it will fail on its own).
+  auto dead = [&](const Slot& slot) { return slot.key != 0 && !slot.undone && vertex_gone(slot, verts); };
   std::uint64_t erased = 0;
   for (Shard& s : shards_) {
     std::lock_guard lock(s.mutex);
     for (std::size_t i = 0; i < s.slots.size();) {
-      Slot& slot = s.slots[i];
-      // A done insertion whose vertex incarnation is gone can no longer be
-      // undone by ticket (an undo claimed for it will fail on its own).
-      const bool dead = slot.key != 0 && !slot.undone && vertex_gone(slot, verts);
-      if (dead) {
-        s.erase(&slot);  // the next entry may have shifted into i: look at i again
+      if (dead(s.slots[i])) {
+        s.erase(&s.slots[i]);  // the next entry may have shifted into i: look at i again
         ++erased;
       } else {
         ++i;
       }
     }
   }
+  std::vector<std::uint64_t> to_compact;
+  {
+    std::unique_lock<std::mutex> locks[shard_count];
+    for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+    for (TicketRange* r : ranges_) {
+      for (std::uint32_t k = 0; k < r->n; ++k) {
+        Slot& slot = r->slots[k];
+        if (!dead(slot)) continue;
+        decrement(r->counts[(slot.key - 1) % shard_count].live);
+        slot = Slot{};
+        ++erased;
+      }
+      if (r->mostly_released()) {
+        try {
+          to_compact.push_back(r->first);
+        } catch (const std::bad_alloc&) {
+          // Compacted at a later release or sweep.
+        }
+      }
+    }
+  }
+  for (std::uint64_t first : to_compact) compact(first);
   const std::uint64_t before = live_.fetch_sub(erased, std::memory_order_relaxed);
   // Next sweep when the table doubles past what is live now (amortised O(1)).
   // Tickets issued during the sweep may be among the erased (issue() counts

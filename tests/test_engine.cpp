@@ -978,6 +978,41 @@ TEST_CASE("engine: remove_insertions undoes a batch, all or nothing", "[engine][
   }
 }
 
+TEST_CASE("engine: a large batch mostly undone keeps the rest by ticket", "[engine][tsan]") {
+  // A batch this size keeps its tickets in a range (tickets.hpp); undoing 15
+  // of every 16, some before they ran (parked), compacts the range into the
+  // hashed shards: the rest must still be found, read and undone by ticket.
+  const std::vector<Point3> pts = random_points(scaled(8000, 2000), 99);
+  pdt::Triangulation t;
+  std::vector<Point3> kept_points;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(2));
+    ErrorSink errors;
+    const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
+    std::vector<pdt::Engine::Ticket> undo, kept;
+    for (std::size_t i = 0; i < pts.size(); ++i) (i % 16 == 5 ? kept : undo).push_back(first + i);
+    e.remove_insertions(undo, errors.callback());
+    e.drain();
+    errors.require_none();
+    for (const pdt::Engine::Ticket k : kept) {
+      const pdt::InsertResult r = e.insertion_result(k);
+      REQUIRE(r.inserted);
+      REQUIRE(t.is_vertex(r.handle()));
+      kept_points.push_back(pts[k - first]);
+    }
+    for (const pdt::Engine::Ticket u : {undo.front(), undo.back()})
+      REQUIRE(error_of([&] { (void)e.insertion_result(u); }) == pdt::ErrorCode::invalid_argument);
+    REQUIRE(t.number_of_vertices() == kept.size());
+    require_valid(t);
+    require_same_as_cgal(t, kept_points);
+    for (const pdt::Engine::Ticket k : kept) e.remove_insertion(k, errors.callback());
+    e.drain();
+    errors.require_none();
+  });
+  REQUIRE(t.number_of_vertices() == 0);
+}
+
 TEST_CASE("engine: a domain reaching the largest doubles", "[engine][extreme]") {
   // The domain check and the block routing must not overflow either.
   const double m = std::numeric_limits<double>::max();

@@ -1,0 +1,177 @@
+// SPDX-License-Identifier: MIT
+// The engine's ticket table (lib/tickets.hpp) on its own: a large batch's
+// tickets live in a range whose slots follow the run order; every lookup by
+// ticket finds them there; once most are released and none is pending the
+// range is compacted into the hashed shards, and the live tickets keep their
+// state; tickets whose vertex is gone are swept from ranges too.
+#include <catch2/catch.hpp>
+
+#include <numeric>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "pdt/error.hpp"
+#include "stable_array.hpp"
+#include "storage.hpp"
+#include "tickets.hpp"
+
+using pdt::detail::StableArray;
+using pdt::detail::TicketPosition;
+using pdt::detail::TicketState;
+using pdt::detail::TicketTable;
+using pdt::detail::VertexRec;
+
+namespace {
+
+// n vertices 1..n, vertex v with stamp 1000 + v, as the table reads them.
+struct Vertices {
+  StableArray<VertexRec> verts;
+  explicit Vertices(std::size_t n) : verts(n + 1) {
+    verts.grow(n + 1);
+    for (std::size_t v = 1; v <= n; ++v) {
+      verts[v].multiplicity = 1;
+      verts[v].stamp.store(1000 + v);
+    }
+  }
+};
+
+// A permutation of 0..n-1 (the run order of a batch), fixed by seed.
+std::vector<std::uint32_t> run_order(std::size_t n, unsigned seed) {
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::shuffle(order.begin(), order.end(), std::mt19937(seed));
+  return order;
+}
+
+pdt::ErrorCode error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const pdt::Error& e) {
+    return e.code();
+  }
+  FAIL("no pdt::Error thrown");
+  return pdt::ErrorCode::invalid_argument;
+}
+
+}  // namespace
+
+TEST_CASE("tickets: a small batch is hashed, a large one gets a range in run order", "[tickets]") {
+  TicketTable table;
+  const std::size_t small = TicketTable::range_min - 1, large = 4 * TicketTable::range_min + 5;
+  const TicketTable::Issued a = table.issue_ordered(run_order(small, 1));
+  REQUIRE(a.range == nullptr);
+  REQUIRE(a.first == 0);
+  REQUIRE(table.ranged() == 0);
+  const std::uint64_t single = table.issue(1);
+  REQUIRE(single == small);
+  const std::vector<std::uint32_t> order = run_order(large, 2);
+  const TicketTable::Issued b = table.issue_ordered(order);
+  REQUIRE(b.range != nullptr);
+  REQUIRE(b.first == small + 1);
+  REQUIRE(table.ranged() == large);
+  REQUIRE(table.issued() == small + 1 + large);
+  REQUIRE(table.live() == small + 1 + large);
+
+  Vertices v(large);
+  // Finish the range's tickets in run order, each at its position; a few by
+  // lookup alone (no position), as a finish without a hint would.
+  for (std::uint32_t k = 0; k < large; ++k) {
+    const std::uint64_t t = b.first + order[k];
+    REQUIRE(table.view(t).state == TicketState::pending);
+    const TicketPosition at = k % 97 == 0 ? TicketPosition{} : TicketPosition{b.range, k};
+    REQUIRE(table.finish_inserted(t, k + 1, true, 1000 + k + 1, at) == nullptr);
+  }
+  for (std::uint32_t k = 0; k < large; ++k) {
+    const std::uint64_t t = b.first + order[k];
+    const pdt::InsertResult r = table.result(t, v.verts);
+    REQUIRE(r.vertex == k + 1);
+    REQUIRE(r.incarnation == 1000 + k + 1);
+  }
+  // Out of range, before and after.
+  REQUIRE(error_of([&] { (void)table.result(table.issued(), v.verts); }) == pdt::ErrorCode::invalid_argument);
+  REQUIRE(table.view(single).state == TicketState::pending);
+}
+
+TEST_CASE("tickets: an undo parked on a pending ranged ticket comes back at its finish", "[tickets]") {
+  TicketTable table;
+  const std::size_t n = TicketTable::range_min;
+  const std::vector<std::uint32_t> order = run_order(n, 3);
+  const TicketTable::Issued b = table.issue_ordered(order);
+  REQUIRE(b.range != nullptr);
+  pdt::detail::OpRecord undo;
+  const std::uint64_t t = b.first + order[7];
+  REQUIRE(table.park(t, &undo) == nullptr);  // pending: parked
+  REQUIRE(table.finish_inserted(t, 5, true, 1005, {b.range, 7}) == &undo);
+  REQUIRE(table.park(t, &undo) == &undo);  // done: runs now
+}
+
+TEST_CASE("tickets: a mostly released range is compacted; its live tickets keep their state", "[tickets]") {
+  TicketTable table;
+  const std::size_t n = 8 * TicketTable::range_min;
+  const std::vector<std::uint32_t> order = run_order(n, 4);
+  Vertices v(n);
+  const TicketTable::Issued b = table.issue_ordered(order);
+  // All but the last one finished; release 15 of 16 of the finished ones:
+  // a pending ticket keeps the range.
+  for (std::uint32_t k = 0; k + 1 < n; ++k)
+    table.finish_inserted(b.first + order[k], k + 1, true, 1000 + k + 1, {b.range, k});
+  std::vector<std::uint64_t> kept;
+  for (std::uint32_t k = 0; k + 1 < n; ++k) {
+    const std::uint64_t t = b.first + order[k];
+    if (k % 16 == 3) {
+      kept.push_back(t);
+      continue;
+    }
+    (void)table.claim_undo(t, v.verts);
+    table.release(t);
+  }
+  REQUIRE(table.ranged() == n);  // one pending: not compacted
+  REQUIRE(table.live() == kept.size() + 1);
+  // The last one finishes, failed; the next release compacts.
+  table.finish_failed(b.first + order[n - 1], std::make_exception_ptr(std::bad_alloc()), {b.range, std::uint32_t(n - 1)});
+  const std::uint64_t released = kept.back();
+  kept.pop_back();
+  (void)table.claim_undo(released, v.verts);
+  table.release(released);
+  REQUIRE(table.ranged() == 0);
+  REQUIRE(table.live() == kept.size() + 1);
+  // Every kept ticket has its vertex; the released ones are gone; the failed
+  // one still says so (its error was kept in its shard).
+  for (std::uint64_t t : kept) {
+    const pdt::InsertResult r = table.result(t, v.verts);
+    REQUIRE(r.incarnation == 1000 + r.vertex);
+    REQUIRE(table.view(t).state == TicketState::inserted);
+  }
+  REQUIRE(error_of([&] { (void)table.result(released, v.verts); }) == pdt::ErrorCode::invalid_argument);
+  REQUIRE(error_of([&] { (void)table.claim_undo(released, v.verts); }) == pdt::ErrorCode::unknown_vertex);
+  REQUIRE_THROWS_AS(table.result(b.first + order[n - 1], v.verts), std::bad_alloc);
+  // And they can still be undone, from the shards now.
+  for (std::uint64_t t : kept) {
+    REQUIRE(table.claim_undo(t, v.verts).state == TicketState::inserted);
+    table.release(t);
+  }
+  REQUIRE(table.live() == 1);
+}
+
+TEST_CASE("tickets: a sweep erases the ranged tickets whose vertex is gone, and compacts", "[tickets]") {
+  TicketTable table;
+  const std::size_t n = 70000;  // past the sweep's first threshold (2^16 live tickets)
+  const std::vector<std::uint32_t> order = run_order(n, 5);
+  Vertices v(n);
+  const TicketTable::Issued b = table.issue_ordered(order);
+  for (std::uint32_t k = 0; k < n; ++k) table.finish_inserted(b.first + order[k], k + 1, true, 1000 + k + 1, {b.range, k});
+  // Every vertex but each tenth is removed (a new incarnation, or none).
+  for (std::uint32_t k = 0; k < n; ++k)
+    if (k % 10 != 0) v.verts[k + 1].stamp.store(0);
+  table.sweep_if_large(v.verts, n / 10);
+  REQUIRE(table.live() == n / 10);
+  REQUIRE(table.ranged() == 0);  // a tenth live: compacted
+  for (std::uint32_t k = 0; k < n; ++k) {
+    const std::uint64_t t = b.first + order[k];
+    if (k % 10 == 0)
+      REQUIRE(table.result(t, v.verts).vertex == k + 1);
+    else
+      REQUIRE(error_of([&] { (void)table.result(t, v.verts); }) == pdt::ErrorCode::invalid_argument);
+  }
+}

@@ -121,7 +121,7 @@ bool Triangulation::Impl::in_conflict(CellId c, const KPoint& p, const detail::F
 }
 
 void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
-  if (is_small) return;
+  if (is_small || grid_growth == GridGrowth::deferred) return;
   // Resize as the vertex count doubles, unless an engine drives the
   // triangulation: it regrows the grid itself, with the world stopped.
   if (grid_growth == GridGrowth::kernel &&

@@ -133,8 +133,10 @@ struct Triangulation::Impl {
   // engine workers only read it.
   detail::BoxFilter filter;
   detail::JumpGrid grid;
-  // Who regrows the jump grid as the vertex count grows.
-  enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
+  // Who regrows the jump grid as the vertex count grows. deferred: nobody
+  // during a large insert_batch, whose walks start at its last vertex; it
+  // builds the grid once at its end.
+  enum class GridGrowth { kernel, engine, deferred } grid_growth = GridGrowth::kernel;
   std::unique_ptr<OpContext> seq;  // the context of single-threaded calls
   // Free ids beyond what each context keeps (pools.cpp): a context that frees
   // more than it allocates gives segments here, one short of ids takes them

@@ -744,6 +744,37 @@ TEST_CASE("the jump grid follows where the vertices are", "[insert][locate]") {
   }
 }
 
+TEST_CASE("a large insert_batch builds the jump grid once at its end, a small one notes it", "[insert][locate]") {
+  // During a batch at least as large as the mesh, walks start at the last
+  // vertex and the grid is left alone; it is built at the end, over every
+  // vertex, so that the single insertions after it walk as far as ever.
+  const std::vector<Point3> pts = generated_points(pdt::Distribution::uniform, 30000, 13);
+  pdt::Triangulation t;
+  (void)t.insert_batch(std::span(pts).first(1000));
+  (void)t.insert_batch(std::span(pts).subspan(1000, 20000));  // 20x the mesh: deferred
+  const auto& m = pdt::detail::impl_of(t);
+  REQUIRE(m.grid_growth == pdt::Triangulation::Impl::GridGrowth::kernel);
+  REQUIRE(m.grid.built_for == 21000);
+  REQUIRE(m.grid.slot_count > 0);
+  // Every vertex's slot holds a live vertex (its own or one inserted later there).
+  for (pdt::VertexId v = 1; v < t.vertex_id_bound(); ++v)
+    if (t.is_vertex(v)) REQUIRE(t.is_vertex(m.grid.get(m.grid.slot_of(m.verts[v].p))));
+  // A small batch (100 points into 21,000) keeps the grid and notes each vertex.
+  const std::vector<pdt::InsertResult> small = t.insert_batch(std::span(pts).subspan(21000, 100));
+  REQUIRE(m.grid.built_for == 21000);
+  std::size_t noted = 0;
+  for (const pdt::InsertResult& r : small) noted += m.grid.get(m.grid.slot_of(m.verts[r.vertex].p)) == r.vertex;
+  REQUIRE(noted > 90);  // all but those whose slot a later one of the 100 took
+  // Single insertions after it walk a few steps, as after insertions one by one.
+  const std::size_t steps_before = t.stats().walk_steps;
+  for (std::size_t i = 21100; i < pts.size(); ++i) t.insert(pts[i]);
+  const double steps = static_cast<double>(t.stats().walk_steps - steps_before) / static_cast<double>(pts.size() - 21100);
+  INFO("walk steps per single insertion " << steps);
+  REQUIRE(steps < 10);
+  require_valid(t);
+  REQUIRE((canonical_tets(t, pts) == cgal_reference(pts).tets));
+}
+
 TEST_CASE("walks stay short for boxes of any size, subnormal ones included", "[insert][locate][extreme]") {
   // A box whose extent is subnormal could not be scaled (res / extent
   // overflowed): every vertex fell in one slot, and 80,000 points walked 97

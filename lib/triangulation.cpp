@@ -114,24 +114,18 @@ std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> po
   const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
   std::vector<InsertResult> out(points.size());
   Impl& m = *impl_;
-  // A batch at least as large as the mesh: its walks start at its last
-  // vertex, so the jump grid is left alone meanwhile (not noted per
-  // insertion, not rebuilt as the count doubles) and built once at the end,
-  // also if an insertion throws.
-  struct DeferGrid {
+  // A batch at least as large as the mesh walks from its last vertex: the
+  // jump grid is regrown as the count doubles, as always, but its vertices
+  // are not noted one by one (GridGrowth::batch), also if an insertion throws.
+  struct BatchGrid {
     Impl& m;
     bool on;
-    ~DeferGrid() {
-      if (!on) return;
-      m.grid_growth = Impl::GridGrowth::kernel;
-      try {
-        m.grid_rebuild();
-      } catch (const std::bad_alloc&) {
-        // The old grid stays (its slots are checked before use).
-      }
+    ~BatchGrid() {
+      if (on) m.grid_growth = Impl::GridGrowth::kernel;
     }
-  } defer{m, points.size() >= static_cast<std::size_t>(m.n_vertices.load()) && m.grid_growth == Impl::GridGrowth::kernel};
-  if (defer.on) m.grid_growth = Impl::GridGrowth::deferred;
+  } batch_grid{m, points.size() >= static_cast<std::size_t>(m.n_vertices.load()) &&
+                      m.grid_growth == Impl::GridGrowth::kernel};
+  if (batch_grid.on) m.grid_growth = Impl::GridGrowth::batch;
   VertexId previous = no_vertex;  // the walk starts at the last vertex: the order keeps it near
   // The order scatters the reads of points and the writes of out over memory
   // (a cache and TLB miss each). Gathered a chunk at a time in a loop of

@@ -744,24 +744,32 @@ TEST_CASE("the jump grid follows where the vertices are", "[insert][locate]") {
   }
 }
 
-TEST_CASE("a large insert_batch builds the jump grid once at its end, a small one notes it", "[insert][locate]") {
+TEST_CASE("a large insert_batch regrows the jump grid without noting each vertex, a small one notes them", "[insert][locate]") {
   // During a batch at least as large as the mesh, walks start at the last
-  // vertex and the grid is left alone; it is built at the end, over every
-  // vertex, so that the single insertions after it walk as far as ever.
+  // vertex: its vertices are not noted in the grid one by one, but the grid
+  // is still rebuilt from every vertex as the count doubles, so single
+  // insertions after it walk as far as ever.
   const std::vector<Point3> pts = generated_points(pdt::Distribution::uniform, 30000, 13);
   pdt::Triangulation t;
   (void)t.insert_batch(std::span(pts).first(1000));
-  (void)t.insert_batch(std::span(pts).subspan(1000, 20000));  // 20x the mesh: deferred
   const auto& m = pdt::detail::impl_of(t);
+  const std::size_t before = m.grid.built_for;
+  const std::vector<pdt::InsertResult> large = t.insert_batch(std::span(pts).subspan(1000, 20000));  // 20x the mesh
   REQUIRE(m.grid_growth == pdt::Triangulation::Impl::GridGrowth::kernel);
-  REQUIRE(m.grid.built_for == 21000);
+  REQUIRE(m.grid.built_for > before);
+  REQUIRE(2 * m.grid.built_for + 64 > 21000);  // rebuilt at the last doubling
   REQUIRE(m.grid.slot_count > 0);
-  // Every vertex's slot holds a live vertex (its own or one inserted later there).
-  for (pdt::VertexId v = 1; v < t.vertex_id_bound(); ++v)
-    if (t.is_vertex(v)) REQUIRE(t.is_vertex(m.grid.get(m.grid.slot_of(m.verts[v].p))));
-  // A small batch (100 points into 21,000) keeps the grid and notes each vertex.
+  for (std::size_t s = 0; s < m.grid.slot_count; ++s) {
+    const pdt::VertexId v = m.grid.get(s);
+    if (v != pdt::no_vertex) REQUIRE(t.is_vertex(v));
+  }
+  // The batch's last vertex, inserted after that rebuild, is not in it (noted,
+  // it would be: no later vertex could take its slot).
+  const pdt::VertexId last = large.back().vertex;
+  REQUIRE(m.grid.built_for < 21000);
+  REQUIRE(m.grid.get(m.grid.slot_of(m.verts[last].p)) != last);
+  // A small batch (100 points into 21,000) notes its vertices.
   const std::vector<pdt::InsertResult> small = t.insert_batch(std::span(pts).subspan(21000, 100));
-  REQUIRE(m.grid.built_for == 21000);
   std::size_t noted = 0;
   for (const pdt::InsertResult& r : small) noted += m.grid.get(m.grid.slot_of(m.verts[r.vertex].p)) == r.vertex;
   REQUIRE(noted > 90);  // all but those whose slot a later one of the 100 took

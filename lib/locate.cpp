@@ -124,7 +124,7 @@ void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
   if (is_small) return;
   // Resize as the vertex count doubles, unless an engine drives the
   // triangulation: it regrows the grid itself, with the world stopped.
-  if (grid_growth != GridGrowth::engine &&
+  if (grid_growth == GridGrowth::kernel &&
       static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed) + ctx.d_vertices) >= 2 * grid.built_for + 64) {
     fold_counters(ctx);
     try {
@@ -134,7 +134,7 @@ void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
     }
     return;
   }
-  if (grid.slot_count && grid_growth != GridGrowth::batch) grid.set(grid.slot_of(pt(v)), v);
+  if (grid.slot_count && !ctx.large_batch) grid.set(grid.slot_of(pt(v)), v);
 }
 
 // Holds (shared) a cell containing s and, if that cell is infinite, its

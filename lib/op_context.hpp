@@ -38,6 +38,12 @@ struct OpContext {
   // read_vertex. Invariant: alone implies locking and outside_readers (its
   // operations keep the engine's semantics: needs_global, no flat insertion).
   bool alone = false;
+  // The sequential context runs Triangulation::insert_batch of at least as
+  // many points as the mesh holds: each walk starts at the vertex made before
+  // it, so grid_note does not note the new vertices in the jump grid one by
+  // one; the grid is still rebuilt from every vertex as the count doubles.
+  // (Engine workers leave it false: measured, no faster there.)
+  bool large_batch = false;
 
   // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
   // Invariant: free_cells / free_vertices list ids this context may reuse;

@@ -114,18 +114,13 @@ std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> po
   const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
   std::vector<InsertResult> out(points.size());
   Impl& m = *impl_;
-  // A batch at least as large as the mesh walks from its last vertex: the
-  // jump grid is regrown as the count doubles, as always, but its vertices
-  // are not noted one by one (GridGrowth::batch), also if an insertion throws.
-  struct BatchGrid {
-    Impl& m;
-    bool on;
-    ~BatchGrid() {
-      if (on) m.grid_growth = Impl::GridGrowth::kernel;
-    }
-  } batch_grid{m, points.size() >= static_cast<std::size_t>(m.n_vertices.load()) &&
-                      m.grid_growth == Impl::GridGrowth::kernel};
-  if (batch_grid.on) m.grid_growth = Impl::GridGrowth::batch;
+  // A batch at least as large as the mesh: its vertices are not noted in
+  // the jump grid one by one (OpContext::large_batch), also if one throws.
+  struct LargeBatch {
+    detail::OpContext& ctx;
+    ~LargeBatch() { ctx.large_batch = false; }
+  } large_batch{*m.seq};
+  m.seq->large_batch = points.size() >= static_cast<std::size_t>(m.n_vertices.load());
   VertexId previous = no_vertex;  // the walk starts at the last vertex: the order keeps it near
   // The order scatters the reads of points and the writes of out over memory
   // (a cache and TLB miss each). Gathered a chunk at a time in a loop of

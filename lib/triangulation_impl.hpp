@@ -133,11 +133,8 @@ struct Triangulation::Impl {
   // engine workers only read it.
   detail::BoxFilter filter;
   detail::JumpGrid grid;
-  // Who regrows the jump grid as the vertex count grows, and whether each
-  // new vertex is noted in its slot. batch: during a large insert_batch, the
-  // kernel regrows it but notes nothing (the batch's walks start at its last
-  // vertex; the grid is rebuilt from every vertex as the count doubles).
-  enum class GridGrowth { kernel, engine, batch } grid_growth = GridGrowth::kernel;
+  // Who regrows the jump grid as the vertex count grows.
+  enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
   std::unique_ptr<OpContext> seq;  // the context of single-threaded calls
   // Free ids beyond what each context keeps (pools.cpp): a context that frees
   // more than it allocates gives segments here, one short of ids takes them

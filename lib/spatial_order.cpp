@@ -4,6 +4,8 @@
 #endif
 #include "spatial_order.hpp"
 
+#include <sys/mman.h>
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Spatial_sort_traits_adapter_3.h>
 #include <CGAL/property_map.h>
@@ -14,12 +16,12 @@
 
 #include <algorithm>
 #include <cassert>
+#include <new>
 #include <numeric>
 #include <utility>
 
 #include "box_lattice.hpp"
 #include "mix64.hpp"
-#include "stable_array.hpp"
 
 namespace pdt::detail {
 
@@ -150,6 +152,26 @@ void radix_sort(Keyed* a, std::size_t n, Keyed* scratch) {
   assert(std::is_sorted(a, a + n));
 }
 
+// Room for the radix sort, contiguous, mapped for the sort and unmapped after
+// it: freed to the heap, its 12 MB at 1M points stayed in the process beside
+// the mesh built next. (Not a StableArray: in the mimalloc build that one is
+// chunked, not contiguous.)
+struct MappedScratch {
+  Keyed* items = nullptr;
+  std::size_t bytes = 0;
+  explicit MappedScratch(std::size_t n) : bytes(n * sizeof(Keyed)) {
+    if (n == 0) return;
+    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    items = static_cast<Keyed*>(p);
+  }
+  ~MappedScratch() {
+    if (items) ::munmap(items, bytes);
+  }
+  MappedScratch(const MappedScratch&) = delete;
+  MappedScratch& operator=(const MappedScratch&) = delete;
+};
+
 template <class Body>
 void for_range(std::size_t n, bool parallel, const Body& body) {
   if (parallel)
@@ -217,16 +239,13 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   // one thread: keys in vector lanes and radix_sort took the whole order from
   // 0.17 to 0.085 s.)
   const bool threads = parallel && tbb::this_task_arena::max_concurrency() > 1;
-  // Mapped for the sort and unmapped after it (StableArray): freed to the
-  // heap, 12 MB at 1M points stayed in the process beside the mesh built next.
-  StableArray<Keyed> scratch(threads ? 1 : n - n / 4);
-  scratch.grow(threads ? 1 : n - n / 4, false);
+  const MappedScratch scratch(threads ? 0 : n - n / 4);
   for (std::size_t end = n; end > 0;) {
     const std::size_t begin = end >= 16 ? end / 4 : 0;
     if (threads)
       tbb::parallel_sort(items.begin() + static_cast<std::ptrdiff_t>(begin), items.begin() + static_cast<std::ptrdiff_t>(end));
     else
-      radix_sort(items.data() + begin, end - begin, &scratch[0]);
+      radix_sort(items.data() + begin, end - begin, scratch.items);
     end = begin;
   }
   // Keys too coarse for the points (a cluster far smaller than the box, or a

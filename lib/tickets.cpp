@@ -156,6 +156,10 @@ void TicketTable::compact(std::uint64_t first) {
   std::size_t per_shard[shard_count] = {};
   for (std::uint32_t k = 0; k < r->n; ++k)
     if (const std::uint64_t key = r->slots[k].key) ++per_shard[(key - 1) % shard_count];
+#ifndef NDEBUG
+  // The counts are exact with every shard mutex held: one live per slot with a key.
+  for (unsigned j = 0; j < shard_count; ++j) assert(per_shard[j] == r->counts[j].live.load(std::memory_order_relaxed));
+#endif
   try {
     for (unsigned j = 0; j < shard_count; ++j) shards_[j].reserve(shards_[j].count + per_shard[j]);
   } catch (const std::bad_alloc&) {

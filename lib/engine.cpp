@@ -114,7 +114,7 @@ void EngineState::record_client_error(std::exception_ptr e) {
 OpRecord* EngineState::make_insert(const Point3& p) {
   require_finite(p);
   require_inside(p, domain);
-  tickets.sweep_if_large(impl.verts, static_cast<std::uint64_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
+  sweep_tickets();
   OpRecord* op = records.acquire();
   try {
     op->ticket = tickets.issue(1);
@@ -449,7 +449,7 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
       op->run_end = static_cast<std::uint32_t>(end);
       k = end;
     }
-    e.tickets.sweep_if_large(e.impl.verts, static_cast<std::uint64_t>(std::max<std::int64_t>(0, e.impl.n_vertices.load())));
+    e.sweep_tickets();
     const detail::TicketTable::Issued issued = e.tickets.issue_ordered(shared->index);
     shared->first_ticket = issued.first;
     shared->ticket_range = issued.range;

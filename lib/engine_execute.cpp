@@ -10,6 +10,14 @@
 namespace pdt::detail {
 
 
+namespace {
+// Where an insertion's ticket slot is, if its batch's tickets are in a range.
+TicketPosition ticket_position(const OpRecord& op) {
+  if (!op.batch_done || !op.batch_done->ticket_range) return {};
+  return {op.batch_done->ticket_range, op.batch_pos};
+}
+}  // namespace
+
 // ---------------------------------------------------------------------------
 // The kernel call
 // ---------------------------------------------------------------------------
@@ -18,7 +26,7 @@ OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& 
     case OpKind::insert: {
       // finish_inserted's slot, fetched meanwhile (a batch's slots in a range
       // are written in order: the hardware fetches those ahead).
-      if (!op.only_if_alive && !(op.batch_done && op.batch_done->ticket_range)) tickets.prefetch(op.ticket);
+      if (!op.only_if_alive && !ticket_position(op).range) tickets.prefetch(op.ticket);
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
       const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);
@@ -162,9 +170,7 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
   r.rollbacks = op.rollbacks;
   if ((op.kind == OpKind::insert && !op.only_if_alive) || op.kind == OpKind::remove_insertion) r.ticket = op.ticket;
   if (op.kind == OpKind::insert && !op.only_if_alive) {
-    const TicketPosition at = op.batch_done && op.batch_done->ticket_range
-                                  ? TicketPosition{op.batch_done->ticket_range, op.batch_pos}
-                                  : TicketPosition{};
+    const TicketPosition at = ticket_position(op);
     OpRecord* undo = r.error ? tickets.finish_failed(op.ticket, r.error, at)
                              : tickets.finish_inserted(op.ticket, r.insert.vertex, r.insert.inserted, stamp, at);
     if (undo) {

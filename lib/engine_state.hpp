@@ -51,6 +51,7 @@
 //     drain() returns when they are equal.
 #include <oneapi/tbb/task_group.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <coroutine>
@@ -213,6 +214,10 @@ struct EngineState {
 
   // -- submission (engine.cpp) ---------------------------------------------------
   OpRecord* make_insert(const Point3& p);
+  // tickets.sweep_if_large against the live vertex count (before issuing).
+  void sweep_tickets() {
+    tickets.sweep_if_large(impl.verts, static_cast<std::uint64_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
+  }
   OpRecord* make_remove(VertexHandle v);
   // Routes op to its block; it stands for `count` operations (a run: its points).
   void submit(OpRecord* op, std::uint32_t count = 1);

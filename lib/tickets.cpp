@@ -146,11 +146,16 @@ std::uint64_t TicketTable::erase(std::uint64_t t, Slot* slot) {
   return r->mostly_released() ? r->first : no_range;
 }
 
+std::array<std::unique_lock<std::mutex>, TicketTable::shard_count> TicketTable::lock_all_shards() const {
+  std::array<std::unique_lock<std::mutex>, shard_count> locks;
+  for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+  return locks;
+}
+
 void TicketTable::compact(std::uint64_t first) {
   if (first == no_range) return;
   std::lock_guard issuing(issue_mutex_);
-  std::unique_lock<std::mutex> locks[shard_count];
-  for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+  auto locks = lock_all_shards();
   TicketRange* r = range_of(first);
   if (!r || r->first != first || !r->mostly_released()) return;  // gone, or no longer worth it
   std::size_t per_shard[shard_count] = {};
@@ -248,8 +253,7 @@ TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> or
   assert(r->live_now() == n);
   TicketRange* range = r.get();
   {
-    std::unique_lock<std::mutex> locks[shard_count];  // readers hold one: hold them all
-    for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+    const auto locks = lock_all_shards();  // readers hold one: hold them all
     ranges_.push_back(range);  // may throw: nothing issued yet. The largest first: still sorted
     r.release();
   }
@@ -399,8 +403,7 @@ void TicketTable::sweep_if_large(const StableArray<VertexRec>& verts, std::uint6
   }
   std::vector<std::uint64_t> to_compact;
   {
-    std::unique_lock<std::mutex> locks[shard_count];
-    for (unsigned j = 0; j < shard_count; ++j) locks[j] = std::unique_lock(shards_[j].mutex);
+    const auto locks = lock_all_shards();
     for (TicketRange* r : ranges_) {
       for (std::uint32_t k = 0; k < r->n; ++k) {
         Slot& slot = r->slots[k];

@@ -27,6 +27,7 @@
 // range's released slot has key 0); pending slots are never swept; a parked
 // undo exists only on a pending slot; a range with a pending slot is never
 // compacted (an insertion's TicketPosition points into it until it finishes).
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <exception>
@@ -209,6 +210,9 @@ class TicketTable {
   // another thread may have compacted it meanwhile. Takes issue_mutex_, then
   // every shard mutex.
   void compact(std::uint64_t first);
+  // Every shard mutex, taken in index order (after issue_mutex_ where that is
+  // taken too): what changing ranges_ needs, and a sweep of the ranges.
+  std::array<std::unique_lock<std::mutex>, shard_count> lock_all_shards() const;
   [[noreturn]] static void unknown(std::uint64_t t, const char* why);
   // A done insertion whose vertex incarnation is gone (removed by handle or
   // id, perhaps the id reused since): its ticket is released, whether or not

@@ -204,7 +204,14 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
     std::coroutine_handle<> h = a->waiter;  // `a` may be gone once h resumes
     spawn(h);
   }
-  records.release(opp);
+  if (w.kept_count < Worker::kept_max) {  // for this worker's next run point
+    OpRecordPool::reset(opp);
+    opp->next.store(w.kept, std::memory_order_relaxed);
+    w.kept = opp;
+    ++w.kept_count;
+  } else {
+    records.release(opp);
+  }
   w.finished.store(w.finished.load(std::memory_order_relaxed) + 1, std::memory_order_release);
 }
 

@@ -164,13 +164,18 @@ WorkerCoroutine EngineState::body(Worker& w) {
 }
 
 OpRecord* EngineState::take_from_run(Worker& w, OpRecord*& run) {
-  OpRecord* one = nullptr;
-  try {
-    if (!w.spare) w.spare = records.acquire();
-    one = records.acquire();
-  } catch (const std::bad_alloc&) {
-    std::swap(one, w.spare);  // the spare, if there is one
-    if (!one) return nullptr;
+  OpRecord* one = w.kept;
+  if (one) {
+    w.kept = one->next.load(std::memory_order_relaxed);
+    --w.kept_count;
+  } else {
+    try {
+      if (!w.spare) w.spare = records.acquire();
+      one = records.acquire();
+    } catch (const std::bad_alloc&) {
+      std::swap(one, w.spare);  // the spare, if there is one
+      if (!one) return nullptr;
+    }
   }
   assert(run->run_next < run->run_end);
   const BatchCallback& batch = *run->batch_done;

@@ -146,6 +146,13 @@ struct alignas(64) Worker {
   // of memory): with it a worker always makes progress, and the record it
   // frees on completion serves the next point. Refilled when the pool can.
   OpRecord* spare = nullptr;
+  // Records this worker completed, kept (reset) for its runs' next points,
+  // so that a batch's insertion takes no pool mutex to get a record and none
+  // to give it back: at most kept_max, linked through OpRecord::next. Only
+  // the worker's own task touches them (complete and take_from_run).
+  static constexpr unsigned kept_max = 64;
+  OpRecord* kept = nullptr;
+  unsigned kept_count = 0;
   std::chrono::steady_clock::time_point slept_at;
   // Statistics: written by the worker, read by stats() (relaxed).
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},

@@ -44,7 +44,7 @@ OpRecord* OpRecordPool::acquire() {
   return first;
 }
 
-void OpRecordPool::release(OpRecord* op) {
+void OpRecordPool::reset(OpRecord* op) {
   op->done = nullptr;
   op->visitor = nullptr;
   op->batch_done = nullptr;
@@ -57,6 +57,10 @@ void OpRecordPool::release(OpRecord* op) {
   op->vertex = no_vertex;
   op->run_next = op->run_end = 0;
   op->batch_pos = 0;
+}
+
+void OpRecordPool::release(OpRecord* op) {
+  reset(op);
   Shard& s = shards_[my_shard()];
   std::lock_guard lock(s.mutex);
   op->next.store(s.head, std::memory_order_relaxed);

@@ -66,6 +66,7 @@ class OpRecordPool {
   OpRecordPool& operator=(const OpRecordPool&) = delete;
   OpRecord* acquire();          // throws std::bad_alloc (nothing changed)
   void release(OpRecord* op);   // resets the record; never fails
+  static void reset(OpRecord* op);  // as a fresh record, but for `next` and `kind`
 
  private:
   static constexpr unsigned shards = 16;

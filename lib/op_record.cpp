@@ -19,11 +19,25 @@ unsigned OpRecordPool::my_shard() {
 
 OpRecord* OpRecordPool::acquire() {
   const unsigned home = my_shard();
-  for (unsigned k = 0; k < shards; ++k) {
-    Shard& s = shards_[(home + k) % shards];
+  // Records go back to the shard of the thread that completes them (a
+  // worker's), so a submitter's own shard is often empty: it looks first
+  // where it found one last, then from its own on.
+  thread_local unsigned found_last = shards;
+  if (found_last < shards) {
+    Shard& s = shards_[found_last];
     std::lock_guard lock(s.mutex);
     if (OpRecord* op = s.head) {
       s.head = op->next.load(std::memory_order_relaxed);
+      return op;
+    }
+  }
+  for (unsigned k = 0; k < shards; ++k) {
+    const unsigned at = (home + k) % shards;
+    Shard& s = shards_[at];
+    std::lock_guard lock(s.mutex);
+    if (OpRecord* op = s.head) {
+      s.head = op->next.load(std::memory_order_relaxed);
+      found_last = at;
       return op;
     }
   }

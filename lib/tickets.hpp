@@ -177,12 +177,14 @@ class TicketTable {
   struct alignas(64) Shard {
     mutable std::mutex mutex;
     std::vector<Slot, SlotAllocator<Slot>> slots;  // power of two (or empty), at most half full
-    // slots.data() and slots.size() - 1 for prefetch(), which reads them
-    // without the mutex; written under it whenever slots is replaced.
-    std::atomic<std::uintptr_t> prefetch_base{0};
-    std::atomic<std::size_t> prefetch_mask{0};
     std::size_t count = 0;
-    std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
+    // slots.data() and slots.size() - 1 for prefetch(), which reads them
+    // without the mutex; written under it whenever slots is replaced. On a
+    // line of their own: a worker reads them for each insertion while a
+    // submitter writes count and the mutex for each ticket it issues.
+    alignas(64) std::atomic<std::uintptr_t> prefetch_base{0};
+    std::atomic<std::size_t> prefetch_mask{0};
+    alignas(64) std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
     Slot* find(std::uint64_t t);
     const Slot* find(std::uint64_t t) const;
     void insert(std::uint64_t t);  // room must exist

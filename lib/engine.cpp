@@ -212,8 +212,9 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
   if (!where->is_active()) where->initialize();
   const unsigned workers = options.workers ? options.workers : static_cast<unsigned>(std::max(1, where->max_concurrency()));
   unsigned blocks = options.blocks_per_axis;
-  if (!blocks)
-    while (blocks < detail::Partition::max_blocks_per_axis && blocks * blocks * blocks < 64 * workers) ++blocks;
+  if (!blocks)  // EngineOptions::blocks_per_axis says why these numbers
+    while (blocks < detail::Partition::max_blocks_per_axis && blocks * blocks * blocks < std::max(512u, 64 * workers))
+      ++blocks;
   // One engine at a time: attach (a refusal changes nothing), then build.
   Triangulation::Impl& impl = detail::impl_of(t);
   if (impl.engine.load(std::memory_order_acquire) == nullptr && impl.seq->in_hook)

@@ -206,7 +206,7 @@ TEST_CASE("engine: with threads = 0 the workers follow the arena's concurrency",
     const EngineRun run = replay_engine(t, s, *s.box, o, ArenaMode::inside, conc);
     REQUIRE(run.threads == static_cast<unsigned>(conc));
     unsigned b = 1;
-    while (b * b * b < 64 * run.threads) ++b;
+    while (b * b * b < std::max(512u, 64 * run.threads)) ++b;  // EngineOptions::blocks_per_axis
     REQUIRE(run.blocks == b);
     require_stats(run, s.ops.size(), run.threads);
     require_result(t, s);
@@ -1210,7 +1210,7 @@ TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
     // A degenerate (flat) box is allowed: lo == hi on an axis.
     REQUIRE_FALSE(error_of([&] { pdt::Engine e(t, pdt::Box{{0, 0, 0}, {1, 1, 0}}, options_with(2)); }));
 
-    for (auto [threads, blocks, want_blocks] : {std::tuple{1u, 0u, 4u}, std::tuple{5u, 0u, 7u},
+    for (auto [threads, blocks, want_blocks] : {std::tuple{1u, 0u, 8u}, std::tuple{5u, 0u, 8u},
                                                 std::tuple{16u, 0u, 11u}, std::tuple{3u, 7u, 7u},
                                                 std::tuple{16u, 1u, 1u}}) {
       pdt::EngineOptions oo = options_with(threads);

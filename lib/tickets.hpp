@@ -10,7 +10,8 @@
 // (removed by handle or id) are swept once they outnumber the live vertices.
 // Tickets issued one at a time (and small batches) have their slots in 16
 // shards (ticket mod 16), each an open-addressing table with backward-shift
-// deletion under its own mutex. 16, not more: a finish holds its shard for
+// deletion under its own mutex; a shard's consecutive tickets four to an
+// aligned group of slots (home_slot in tickets.cpp). 16, not more: a finish holds its shard for
 // one find, and at 1M live tickets a shard's slots fill 4 MiB, large enough
 // for huge pages (SlotAllocator, when advised).
 // A large batch (issue_ordered) gets a range instead (TicketRange): its slots

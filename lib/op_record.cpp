@@ -23,24 +23,20 @@ OpRecord* OpRecordPool::acquire() {
   // worker's), so a submitter's own shard is often empty: it looks first
   // where it found one last, then from its own on.
   thread_local unsigned found_last = shards;
-  if (found_last < shards) {
-    Shard& s = shards_[found_last];
-    std::lock_guard lock(s.mutex);
-    if (OpRecord* op = s.head) {
-      s.head = op->next.load(std::memory_order_relaxed);
-      return op;
-    }
-  }
-  for (unsigned k = 0; k < shards; ++k) {
-    const unsigned at = (home + k) % shards;
+  auto take = [&](unsigned at) -> OpRecord* {
     Shard& s = shards_[at];
     std::lock_guard lock(s.mutex);
-    if (OpRecord* op = s.head) {
+    OpRecord* op = s.head;
+    if (op) {
       s.head = op->next.load(std::memory_order_relaxed);
       found_last = at;
-      return op;
     }
-  }
+    return op;
+  };
+  if (found_last < shards)
+    if (OpRecord* op = take(found_last)) return op;
+  for (unsigned k = 0; k < shards; ++k)
+    if (OpRecord* op = take((home + k) % shards)) return op;
   constexpr std::size_t slab = 1024;
   PDT_FAULT_POINT("op record slab");
   auto fresh = std::make_unique<OpRecord[]>(slab);

@@ -116,6 +116,10 @@ struct Keyed {
   bool operator<(const Keyed& o) const { return key < o.key || (key == o.key && index < o.index); }
 };
 
+// The radix sorts' digits: 11 bits of a key a pass.
+constexpr int digit_bits = 11, passes = (3 * key_bits + digit_bits - 1) / digit_bits;
+constexpr std::size_t digits = std::size_t{1} << digit_bits;
+
 // The end of a radix sort whose last pass wrote `from`: the items back in a
 // (if they are not there), then each run of equal keys sorted by index.
 void finish_radix_sort(Keyed* a, std::size_t n, const Keyed* from) {
@@ -139,8 +143,6 @@ void radix_sort(Keyed* a, std::size_t n, Keyed* scratch) {
     std::sort(a, a + n);
     return;
   }
-  constexpr int digit_bits = 11, passes = (3 * key_bits + digit_bits - 1) / digit_bits;
-  constexpr std::size_t digits = std::size_t{1} << digit_bits;
   std::vector<std::uint32_t> count(passes * digits, 0);
   for (std::size_t i = 0; i < n; ++i)
     for (int p = 0; p < passes; ++p) ++count[p * digits + ((a[i].key >> (p * digit_bits)) & (digits - 1))];
@@ -162,8 +164,6 @@ void radix_sort(Keyed* a, std::size_t n, Keyed* scratch) {
 // the one-thread sort: part c's items with digit d go after those of parts
 // before c with that digit. The same result as radix_sort.
 void radix_sort_parallel(Keyed* a, std::size_t n, Keyed* scratch, unsigned chunks) {
-  constexpr int digit_bits = 11, passes = (3 * key_bits + digit_bits - 1) / digit_bits;
-  constexpr std::size_t digits = std::size_t{1} << digit_bits;
   std::vector<std::uint32_t> count(std::size_t{chunks} * digits);
   auto part = [&](unsigned c) { return n * c / chunks; };
   Keyed* from = a;

@@ -61,15 +61,18 @@ TEST_CASE("spatial order: a permutation, the same every run and in both modes, a
   std::vector<Point3> copies = generated_points(pdt::Distribution::uniform, 5000, 7);
   copies.insert(copies.end(), copies.begin(), copies.end());
   sets.push_back(copies);
-  tbb::task_arena arena(2);
+  // 2 and 3 threads: the rounds' radix sort in 2 and in 3 (uneven) parts.
+  tbb::task_arena arenas[] = {tbb::task_arena(2), tbb::task_arena(3)};
   for (const auto& pts : sets) {
     INFO(pts.size() << " points");
     const std::vector<std::uint32_t> order = pdt::detail::spatial_order(pts, false);
     REQUIRE(is_permutation_of_indices(order, pts.size()));
     REQUIRE(pdt::detail::spatial_order(pts, false) == order);
-    std::vector<std::uint32_t> parallel;
-    arena.execute([&] { parallel = pdt::detail::spatial_order(pts, true); });
-    REQUIRE(parallel == order);  // keys and (key, index) ties decide: threads do not
+    for (tbb::task_arena& arena : arenas) {
+      std::vector<std::uint32_t> parallel;
+      arena.execute([&] { parallel = pdt::detail::spatial_order(pts, true); });
+      REQUIRE(parallel == order);  // keys and (key, index) ties decide: threads do not
+    }
     // Its last round, 3/4 of the points along one curve: a fraction of the
     // input order's path (random points: about 1/10 here; a broken key
     // would leave it near 1).

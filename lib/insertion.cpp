@@ -62,7 +62,13 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   };
   VertexId s = start_vertex(ctx, p, hint);
   if (s == no_vertex) return rollback();
-  // Hold s's cell (stable: it contains s, which we hold), then walk.
+  // Hold s's cell (stable: it contains s, which we hold), then walk, taking
+  // exclusively what the walk locks (OpContext::shares_exclusive).
+  struct WalkLocks {
+    OpContext& ctx;
+    explicit WalkLocks(OpContext& c) : ctx(c) { ctx.shares_exclusive = ctx.locking; }
+    ~WalkLocks() { ctx.shares_exclusive = false; }
+  } walk_locks(ctx);
   CellId c = verts[s].cell;
   for (int i = 0; i < 4; ++i)
     if (!lock_shared(ctx, cells[c].v[i])) return rollback();
@@ -73,6 +79,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   }
   bool outside = false;
   c = walk(ctx, p, c, &outside, eps);
+  ctx.shares_exclusive = false;
   if (c == no_cell) return rollback();
   if (!outside) {
     const CellRec& cr = cells[c];

@@ -44,6 +44,12 @@ struct OpContext {
   // one; the grid is still rebuilt from every vertex as the count doubles.
   // (Engine workers leave it false: measured, no faster there.)
   bool large_batch = false;
+  // An insertion's walk: lock_shared takes the words exclusively. The
+  // insertion writes the cells around where the walk ends, so most of the
+  // walk's shares would be upgraded (a second atomic and a search of
+  // held_shared each); taken exclusively once they are not. Set by insert()
+  // for its walk only, false between operations.
+  bool shares_exclusive = false;
 
   // -- pools (paper §3.2: per-thread, refilled by chunks) --------------------
   // Invariant: free_cells / free_vertices list ids this context may reuse;

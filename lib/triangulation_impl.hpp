@@ -243,8 +243,9 @@ struct Triangulation::Impl {
   // -- locks (vertex_locks.cpp; no-ops when !ctx.locking) -----------------------
   // Inline: most contexts take no lock words (the sequential one, an engine's
   // only worker), and the walk and the conflict search ask per vertex.
-  bool lock_shared(OpContext& ctx, VertexId v) {
-    return !ctx.locking || ctx.alone || v == 0 || lock_shared_word(ctx, v);
+  bool lock_shared(OpContext& ctx, VertexId v) {  // exclusive when ctx.shares_exclusive
+    return !ctx.locking || ctx.alone || v == 0 ||
+           (ctx.shares_exclusive ? lock_exclusive_word(ctx, v) : lock_shared_word(ctx, v));
   }
   bool lock_exclusive(OpContext& ctx, VertexId v) {  // upgrades a shared lock we hold
     return !ctx.locking || ctx.alone || v == 0 || lock_exclusive_word(ctx, v);

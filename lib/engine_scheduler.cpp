@@ -126,17 +126,35 @@ WorkerCoroutine EngineState::body(Worker& w) {
     }
     bool sleep = false;
     OpRecord* run = nullptr;  // a run of an insert_batch in hand (not queued meanwhile)
+    // The run finished last in this claim: its batch and where it ended. A
+    // batch's order is BRIO's rounds, each along a curve, so a block's queue
+    // holds one stretch of each round. The worker moves on to its next block
+    // when the next run here is not the one the batch's order takes next (a
+    // later round): its blocks then get their rounds in turn, close to the
+    // batch's own order, instead of each block filling up before the next is
+    // started (measured: 5% more cells made and walk steps, 1 worker, 1M).
+    std::uintptr_t finished_batch = 0;  // its BatchCallback's address (compared only)
+    std::uint32_t finished_end = 0;
     for (std::uint32_t served = 0; served < batch && !sleep; ++served) {
       OpRecord* op = nullptr;
       if (!run) {
         op = b->queue.pop();
         if (!op) break;
         b->queued.fetch_sub(1, std::memory_order_relaxed);
-        if (op->run_end) run = op;
+        if (op->run_end) {
+          if (reinterpret_cast<std::uintptr_t>(op->batch_done) == finished_batch && op->run_next != finished_end) {
+            count_in_front(*b, op);  // a later round: after this worker's other blocks
+            w.repeat = max_repeat;   // claim() starts at the next block
+            break;
+          }
+          run = op;
+        }
       }
       if (run) {
+        const auto of = reinterpret_cast<std::uintptr_t>(run->batch_done);
         op = take_from_run(w, run);
         if (!op) break;  // no record to be had now: the run waits in its block
+        if (!run) finished_batch = of, finished_end = op->batch_pos + 1;
       }
       const Outcome outcome = execute(w, op);
       if (outcome == Outcome::rollback || outcome == Outcome::global)

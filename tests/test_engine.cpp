@@ -896,6 +896,32 @@ TEST_CASE("engine: one worker inserts a batch in its spatial order, a run not cu
   require_same_as_cgal(t, pts);
 }
 
+TEST_CASE("engine: one worker takes a batch's rounds block after block, as the sequential batch does",
+          "[engine][tsan]") {
+  // The batch's order is rounds of a biased randomized order, so each block's
+  // queue holds a stretch of every round. A worker that served each block to
+  // its end before the next would insert a dense block beside empty ones:
+  // measured, 16% more cells made than the sequential batch at 20k points
+  // (5% at 1M). Moving on when the next run is a later round keeps the
+  // rounds' order, and the work with it, within a few percent.
+  const std::vector<Point3> pts = random_points(scaled(20000, 4000), 97);
+  pdt::Triangulation seq;
+  (void)seq.insert_batch(pts);
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(1));
+    REQUIRE(e.blocks_per_axis() >= 8);  // many blocks: each holds a stretch of every round
+    (void)e.insert_batch(pts);
+    e.drain();
+  });
+  const double made = static_cast<double>(t.stats().cells_created_by_insert);
+  const double made_seq = static_cast<double>(seq.stats().cells_created_by_insert);
+  INFO("cells made by the engine's batch / by the sequential batch: " << made / made_seq);
+  CHECK(made <= 1.05 * made_seq);
+  require_same_as_cgal(t, pts);
+}
+
 TEST_CASE("engine: a ticket is released once its vertex is removed by id or handle", "[engine]") {
   pdt::Triangulation t;
   insert_all(t, random_points(200, 17));

@@ -24,9 +24,10 @@ struct EngineOptions {
   unsigned blocks_per_axis = 0;
   double contention_low = 0.7;      // PDT_CONTENTION_LOW: u-, sleep below this progress ratio
   double contention_high = 0.9;     // PDT_CONTENTION_HIGH: u+, wake a sleeper above it
-  unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements
+  unsigned contention_window = 32;  // PDT_CONTENTION_WINDOW: attempts between two judgements (0 counts as 1)
   std::size_t grid_slots = 1u << 23;  // PDT_GRID_SLOTS: most slots of the jump-and-walk grid, which
-                                      // grows with the vertex count (about 2 vertices per slot)
+                                      // grows with the vertex count (about 2 vertices per slot; 0
+                                      // counts as 1)
   // PDT_ESCALATE_AFTER: an operation rolled back this many times runs with
   // the world stopped (alone), so none starves (0 = never escalate).
   unsigned escalate_after = 64;

@@ -133,6 +133,12 @@ class Triangulation {
   // result is the same, the triangulation being unique. Results come in the
   // batch's order. Checks every point first: throws pdt::Error
   // (non_finite_coordinate) naming the first bad one and inserts nothing.
+  // Copies of one point: one of them reports inserted = true (which one
+  // follows the insertion order, not the batch's), the others false, all with
+  // the same vertex. A change hook (set_change_hook) that throws stops the
+  // batch there: the exception propagates, the points inserted before it
+  // (and the one whose hook threw) stay, the rest are not inserted, and the
+  // results are lost; is_vertex / locate tell which points are in.
   std::vector<InsertResult> insert_batch(std::span<const Point3> points);
   // Undoes one insertion of v. Throws pdt::Error(unknown_vertex) for the infinite
   // vertex, an id never issued or a vertex already gone, and changes nothing.

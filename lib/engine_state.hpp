@@ -142,6 +142,12 @@ struct alignas(64) Worker {
   std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
+  // The batch point this worker took last: its batch (the BatchCallback's
+  // address, compared only, never read through) and its position + 1. A run
+  // that does not go on from there walks from the jump grid, not from
+  // last_inserted, which may lie in another block across a dense region.
+  std::uintptr_t batch_taken = 0;
+  std::uint32_t batch_taken_end = 0;
   // A record kept for a run's next point when the pool cannot give one (out
   // of memory): with it a worker always makes progress, and the record it
   // frees on completion serves the next point. Refilled when the pool can.

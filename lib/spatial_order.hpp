@@ -21,4 +21,13 @@ namespace pdt::detail {
 // must be finite.
 std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool parallel);
 
+// The round of the order's position k (< n) among n points: 0 for the last
+// round, [n / 4, n), 1 for [n / 16, n / 4), and so on (the rounds
+// spatial_order sorts; CGAL's fallback cuts about the same places).
+inline unsigned brio_round(std::size_t k, std::size_t n) {
+  unsigned round = 0;
+  for (std::size_t end = n; end >= 16 && k < end / 4; end /= 4) ++round;
+  return round;
+}
+
 }  // namespace pdt::detail

@@ -107,3 +107,22 @@ TEST_CASE("spatial order: a cluster far smaller than the box, huge and subnormal
             0.25 * path_length(pts, identity(pts.size()), last_round, unit));
   }
 }
+
+TEST_CASE("spatial order: brio_round numbers the rounds the order sorts", "[insert][order]") {
+  // Rounds [n/4, n), [n/16, n/4), ... down to an end below 16: numbered 0, 1, ...
+  const std::size_t n = 1000;
+  CHECK(pdt::detail::brio_round(999, n) == 0);
+  CHECK(pdt::detail::brio_round(250, n) == 0);
+  CHECK(pdt::detail::brio_round(249, n) == 1);
+  CHECK(pdt::detail::brio_round(62, n) == 1);
+  CHECK(pdt::detail::brio_round(61, n) == 2);
+  CHECK(pdt::detail::brio_round(15, n) == 2);
+  CHECK(pdt::detail::brio_round(14, n) == 3);  // [0, 15): the first round, its end below 16 after it
+  CHECK(pdt::detail::brio_round(0, n) == 3);
+  CHECK(pdt::detail::brio_round(5, 10) == 0);  // fewer than 16: one round
+  // From one position to the next the round stays or steps back by one.
+  for (std::size_t k = 1; k < n; ++k) {
+    const unsigned a = pdt::detail::brio_round(k - 1, n), b = pdt::detail::brio_round(k, n);
+    CHECK((a == b || a == b + 1));
+  }
+}

@@ -93,6 +93,7 @@ EngineState::~EngineState() {
   for (auto& b : bodies) b.handle.destroy();
   // Give the workers' pools and statistics back to the triangulation.
   for (auto& w : workers) {
+    publish_batch_done(*w);  // done at each claim's end; nothing is left here after a drain
     impl.merge_pools(*impl.seq, *w->ctx);
     impl.seq->stats += w->ctx->stats;
   }

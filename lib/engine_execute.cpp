@@ -197,7 +197,11 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
         record_client_error(std::current_exception());
       }
     }
-    if (batch_done->remaining.fetch_sub(1, std::memory_order_acq_rel) == 1) delete batch_done;
+    if (batch_done != w.batch_done_unpublished) {
+      publish_batch_done(w);
+      w.batch_done_unpublished = batch_done;
+    }
+    ++w.batch_done_count;  // published at the end of the claim
   }
   if (OpAwaitBase* a = op.awaiter) {
     a->result = std::move(r);
@@ -213,6 +217,15 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
     records.release(opp);
   }
   w.finished.store(w.finished.load(std::memory_order_relaxed) + 1, std::memory_order_release);
+}
+
+void EngineState::publish_batch_done(Worker& w) {
+  BatchCallback* batch = w.batch_done_unpublished;
+  if (!batch) return;
+  assert(w.batch_done_count > 0);
+  if (batch->remaining.fetch_sub(w.batch_done_count, std::memory_order_acq_rel) == w.batch_done_count) delete batch;
+  w.batch_done_unpublished = nullptr;
+  w.batch_done_count = 0;
 }
 
 }  // namespace pdt::detail

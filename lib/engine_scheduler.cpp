@@ -170,6 +170,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         case Verdict::carry_on: break;
       }
     }
+    publish_batch_done(w);
     if (run) count_in_front(*b, run);  // what is left of it, next in its block
     release(*b);
     // Work left behind while workers idle: let one take it (or another block

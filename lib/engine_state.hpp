@@ -159,6 +159,14 @@ struct alignas(64) Worker {
   static constexpr unsigned kept_max = 64;
   OpRecord* kept = nullptr;
   unsigned kept_count = 0;
+  // Completed operations of one batch (insert_batch, remove_insertions) not
+  // yet taken off its `remaining`: one atomic subtraction per claim, not one
+  // per operation on a line every worker writes. Published at the end of
+  // each claim (publish_batch_done), so before drain() returns. Invariant:
+  // batch_done_count > 0 iff batch_done_unpublished != nullptr, and then
+  // that batch's remaining >= batch_done_count (it is alive).
+  BatchCallback* batch_done_unpublished = nullptr;
+  std::uint64_t batch_done_count = 0;
   std::chrono::steady_clock::time_point slept_at;
   // Statistics: written by the worker, read by stats() (relaxed).
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},
@@ -289,6 +297,9 @@ struct EngineState {
   // (op untouched: re-queue it).
   bool run_global(Worker& w, OpRecord* op, bool escalated = false);
   void complete(Worker& w, OpRecord* op, OpResult& r, std::uint64_t stamp);
+  // Takes w's unpublished completions off their batch's remaining, deleting
+  // the batch when that was the last (see Worker::batch_done_unpublished).
+  void publish_batch_done(Worker& w);
 
   // -- the jump grid's growth, with the world stopped ---------------------------------
   void ensure_grid();  // with the world stopped (or before workers run)

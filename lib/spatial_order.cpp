@@ -283,7 +283,7 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   const unsigned threads = parallel ? static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency())) : 1;
   const MappedScratch scratch(n - n / 4);
   for (std::size_t end = n; end > 0;) {
-    const std::size_t begin = end >= 16 ? end / 4 : 0;
+    const std::size_t begin = brio_round_begin(end);
     const unsigned chunks = static_cast<unsigned>(std::min<std::size_t>(threads, (end - begin) / 4096));
     if (chunks > 1)
       radix_sort_parallel(items.data() + begin, end - begin, scratch.items, chunks);

@@ -21,12 +21,17 @@ namespace pdt::detail {
 // must be finite.
 std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool parallel);
 
+// The order's rounds, as CGAL's: the round ending at `end` begins at
+// brio_round_begin(end): the last 3/4 of the range, down to 16 points (the
+// first round then holds the rest). spatial_order sorts these rounds.
+inline std::size_t brio_round_begin(std::size_t end) { return end >= 16 ? end / 4 : 0; }
+
 // The round of the order's position k (< n) among n points: 0 for the last
-// round, [n / 4, n), 1 for [n / 16, n / 4), and so on (the rounds
-// spatial_order sorts; CGAL's fallback cuts about the same places).
+// round, [n / 4, n), 1 for the one before it, and so on (CGAL's fallback
+// order cuts about the same places).
 inline unsigned brio_round(std::size_t k, std::size_t n) {
   unsigned round = 0;
-  for (std::size_t end = n; end >= 16 && k < end / 4; end /= 4) ++round;
+  for (std::size_t end = n; k < brio_round_begin(end); end = brio_round_begin(end)) ++round;
   return round;
 }
 

@@ -118,7 +118,10 @@ OpRecord* EngineState::make_insert(const Point3& p) {
   sweep_tickets();
   OpRecord* op = records.acquire();
   try {
-    op->ticket = tickets.issue(1);
+    const detail::TicketTable::Issued issued = tickets.issue(1);
+    op->ticket = issued.first;
+    op->ticket_range = issued.range;
+    op->ticket_slot = issued.range->slot_of(issued.first);
   } catch (...) {
     records.release(op);
     throw;

@@ -11,11 +11,8 @@ namespace pdt::detail {
 
 
 namespace {
-// Where an insertion's ticket slot is, if its batch's tickets are in a range.
-TicketPosition ticket_position(const OpRecord& op) {
-  if (!op.batch_done || !op.batch_done->ticket_range) return {};
-  return {op.batch_done->ticket_range, op.batch_pos};
-}
+// Where an insertion's ticket slot is.
+TicketPosition ticket_position(const OpRecord& op) { return {op.ticket_range, op.ticket_slot}; }
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -24,9 +21,9 @@ TicketPosition ticket_position(const OpRecord& op) {
 OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp) {
   switch (op.kind) {
     case OpKind::insert: {
-      // finish_inserted's slot, fetched meanwhile (a batch's slots in a range
-      // are written in order: the hardware fetches those ahead).
-      if (!op.only_if_alive && !ticket_position(op).range) tickets.prefetch(op.ticket);
+      // finish_inserted's slot, fetched meanwhile (a large batch's slots are
+      // written in order: the hardware fetches those ahead).
+      if (!op.only_if_alive && !op.from_batch) TicketTable::prefetch(ticket_position(op));
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
       const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);

@@ -207,7 +207,9 @@ OpRecord* EngineState::take_from_run(Worker& w, OpRecord*& run) {
   one->from_batch = true;
   one->point = batch.points[k];
   one->ticket = batch.first_ticket + batch.index[k];
-  one->batch_pos = k;
+  TicketRange* range = batch.ticket_range;  // slot k if in run order (position), else by ticket
+  one->ticket_range = range;
+  one->ticket_slot = range->position ? k : range->slot_of(one->ticket);
   one->batch_done = run->batch_done;
   if (run->run_next == run->run_end) {
     records.release(run);

@@ -66,7 +66,8 @@ void OpRecordPool::reset(OpRecord* op) {
   op->stamp = 0;
   op->vertex = no_vertex;
   op->run_next = op->run_end = 0;
-  op->batch_pos = 0;
+  op->ticket_range = nullptr;
+  op->ticket_slot = 0;
 }
 
 void OpRecordPool::release(OpRecord* op) {

@@ -24,7 +24,7 @@ struct BatchCallback {
   std::vector<Point3> points;          // insert_batch: in insertion order
   std::vector<std::uint32_t> index;    // points[k] is the caller's points[index[k]]: ticket first_ticket + index[k]
   std::uint64_t first_ticket = 0;
-  TicketRange* ticket_range = nullptr;  // insert_batch: its tickets' slots, if in a range (tickets.hpp)
+  TicketRange* ticket_range = nullptr;  // insert_batch: the range of its tickets' slots (tickets.hpp)
 };
 
 struct OpRecord {
@@ -49,9 +49,11 @@ struct OpRecord {
   // a record of its own (`point` is then the next one's, for routing).
   // run_end == 0: not a run. Invariant: run_next < run_end while queued.
   std::uint32_t run_next = 0, run_end = 0;
-  // One insertion of an insert_batch: its position k in batch_done->points
-  // (its ticket's slot in batch_done->ticket_range, if there is one).
-  std::uint32_t batch_pos = 0;
+  // An insertion with a ticket: where the ticket's slot is (slot ticket_slot
+  // of ticket_range), for its finish. Set at submission, or when a run's
+  // point is taken; the range lives while the ticket is pending.
+  TicketRange* ticket_range = nullptr;
+  std::uint32_t ticket_slot = 0;
 };
 
 // Records come in slabs and are recycled through free lists, one per shard

@@ -58,8 +58,6 @@ std::size_t home_slot(std::uint64_t key, std::size_t mask) {
 TicketTable::Slot* TicketTable::Shard::find(std::uint64_t t) {
   if (slots.empty()) return nullptr;
   const std::size_t mask = slots.size() - 1;
-  assert(prefetch_base.load(std::memory_order_relaxed) == reinterpret_cast<std::uintptr_t>(slots.data()) &&
-         prefetch_mask.load(std::memory_order_relaxed) == mask);  // prefetch() follows the slots
   for (std::size_t i = home_slot(t + 1, mask);; i = (i + 1) & mask) {
     if (slots[i].key == t + 1) return &slots[i];
     if (slots[i].key == 0) return nullptr;
@@ -78,8 +76,6 @@ void TicketTable::Shard::reserve(std::size_t n) {
   std::vector<Slot, SlotAllocator<Slot>> old(want);
   old.swap(slots);
   const std::size_t mask = slots.size() - 1;
-  prefetch_base.store(reinterpret_cast<std::uintptr_t>(slots.data()), std::memory_order_relaxed);
-  prefetch_mask.store(mask, std::memory_order_relaxed);
   for (const Slot& s : old) {
     if (s.key == 0) continue;
     std::size_t i = home_slot(s.key, mask);
@@ -114,7 +110,7 @@ void TicketTable::Shard::erase(Slot* s) {
 // ---------------------------------------------------------------------------
 // The table: where a ticket's slot is
 // ---------------------------------------------------------------------------
-TicketTable::~TicketTable() {
+TicketTable::~TicketTable() {  // open_ is among ranges_
   for (TicketRange* r : ranges_) delete r;
 }
 
@@ -135,7 +131,7 @@ TicketTable::Slot* TicketTable::find(std::uint64_t t, TicketPosition at, TicketR
   }
   if (TicketRange* r = range_of(t)) {
     if (range) *range = r;
-    Slot& slot = r->slots[r->position[t - r->first]];
+    Slot& slot = r->slots[r->slot_of(t)];
     return slot.key == t + 1 ? &slot : nullptr;
   }
   return shard(t).find(t);
@@ -172,6 +168,7 @@ void TicketTable::compact(std::uint64_t first) {
   auto locks = lock_all_shards();
   TicketRange* r = range_of(first);
   if (!r || r->first != first || !r->mostly_released()) return;  // gone, or no longer worth it
+  assert(r != open_);  // the open range's tickets not given out count as pending
   std::size_t per_shard[shard_count] = {};
   for (std::uint32_t k = 0; k < r->n; ++k)
     if (const std::uint64_t key = r->slots[k].key) ++per_shard[(key - 1) % shard_count];
@@ -199,9 +196,10 @@ void TicketTable::compact(std::uint64_t first) {
 }
 
 std::size_t TicketTable::ranged() const {
+  std::lock_guard issuing(issue_mutex_);
   std::lock_guard lock(shards_[0].mutex);
   std::size_t n = 0;
-  for (const TicketRange* r : ranges_) n += r->n;
+  for (const TicketRange* r : ranges_) n += r == open_ ? next_.load(std::memory_order_relaxed) - r->first : r->n;
   return n;
 }
 
@@ -212,52 +210,13 @@ void TicketTable::unknown(std::uint64_t t, const char* why) {
   throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": " + why);
 }
 
-void TicketTable::prefetch(std::uint64_t t) const {
-  const Shard& s = shard(t);
-  const std::uintptr_t base = s.prefetch_base.load(std::memory_order_relaxed);
-  if (base == 0) return;
-  // Integer arithmetic: base and mask may be from two different resizes, so
-  // the address may lie outside every vector (a prefetch never faults).
-  const std::uintptr_t home = base + home_slot(t + 1, s.prefetch_mask.load(std::memory_order_relaxed)) * sizeof(Slot);
-  __builtin_prefetch(reinterpret_cast<const void*>(home), 1);
-}
-
-std::uint64_t TicketTable::issue(std::uint64_t n) {
-  // Tickets are consecutive per call: one issuer at a time reserves room in
-  // every shard it touches, then takes the numbers.
-  std::lock_guard issuing(issue_mutex_);
-  const std::uint64_t first = next_.load(std::memory_order_relaxed);
-  const std::uint64_t per_shard = n / shard_count + 1;
-  for (unsigned k = 0; k < shard_count && k < n; ++k) {
-    Shard& s = shards_[(first + k) % shard_count];
-    std::lock_guard lock(s.mutex);
-    s.reserve(s.count + per_shard);
-  }
-  for (unsigned k = 0; k < shard_count && k < n; ++k) {  // shard by shard: one lock each
-    Shard& s = shard(first + k);
-    std::lock_guard lock(s.mutex);
-    for (std::uint64_t t = first + k; t < first + n; t += shard_count) s.insert(t);
-  }
-  live_.fetch_add(n, std::memory_order_relaxed);
-  next_.store(first + n, std::memory_order_release);
-  return first;
-}
-
-TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> order) {
-  const std::size_t n = order.size();
-  if (n < range_min) return {issue(n), nullptr};
+std::unique_ptr<TicketRange> TicketTable::make_range(std::uint64_t first, std::uint32_t n) {
   PDT_FAULT_POINT("ticket range");
   auto r = std::make_unique<TicketRange>();
-  r->n = static_cast<std::uint32_t>(n);
-  r->slots = std::make_unique<Slot[]>(n);
-  r->position = std::make_unique_for_overwrite<std::uint32_t[]>(n);
-  std::lock_guard issuing(issue_mutex_);
-  const std::uint64_t first = next_.load(std::memory_order_relaxed);
   r->first = first;
-  for (std::uint32_t k = 0; k < n; ++k) {
-    r->slots[k].key = first + order[k] + 1;
-    r->position[order[k]] = k;
-  }
+  r->n = n;
+  r->slots = std::make_unique<Slot[]>(n);
+  for (std::uint32_t k = 0; k < n; ++k) r->slots[k].key = first + k + 1;
   for (unsigned j = 0; j < shard_count; ++j) {  // how many t in [first, first + n) have t % 16 == j
     const std::uint64_t from = first + (j + shard_count - first % shard_count) % shard_count;
     const auto count = static_cast<std::uint32_t>(from < first + n ? (first + n - from + shard_count - 1) / shard_count : 0);
@@ -265,15 +224,88 @@ TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> or
     r->counts[j].pending.store(count, std::memory_order_relaxed);
   }
   assert(r->live_now() == n);
-  TicketRange* range = r.get();
-  {
-    const auto locks = lock_all_shards();  // readers hold one: hold them all
-    ranges_.push_back(range);  // may throw: nothing issued yet. The largest first: still sorted
-    r.release();
+  return r;
+}
+
+std::uint64_t TicketTable::close_open_range() {
+  TicketRange* r = open_;
+  if (!r) return no_range;
+  assert(r == ranges_.back());
+  open_ = nullptr;
+  const auto issued = static_cast<std::uint32_t>(next_.load(std::memory_order_relaxed) - r->first);
+  for (std::uint32_t k = issued; k < r->n; ++k) {  // never given out: neither live nor pending
+    const std::uint64_t t = r->first + k;
+    decrement(r->counts[t % shard_count].live);
+    decrement(r->counts[t % shard_count].pending);
+    r->slots[k] = Slot{};
   }
-  live_.fetch_add(n, std::memory_order_relaxed);
-  next_.store(first + n, std::memory_order_release);
-  return {first, range};
+  r->n = issued;
+  if (issued == 0) {
+    ranges_.pop_back();
+    delete r;
+    return no_range;
+  }
+  return r->mostly_released() ? r->first : no_range;
+}
+
+void TicketTable::reserve_range() {
+  if (ranges_.size() == ranges_.capacity()) ranges_.reserve(2 * ranges_.size() + 8);
+}
+
+TicketTable::Issued TicketTable::issue(std::uint64_t n) {
+  assert(n >= 1 && n < (std::uint64_t{1} << 31));
+  std::uint64_t to_compact = no_range;
+  Issued out;
+  {
+    std::lock_guard issuing(issue_mutex_);
+    const std::uint64_t first = next_.load(std::memory_order_relaxed);
+    if (!open_ || first + n > open_->first + open_->n) {
+      // Made before anything changes: a failure issues nothing.
+      std::unique_ptr<TicketRange> r =
+          make_range(first, std::max(open_range_size, static_cast<std::uint32_t>(n)));
+      const auto locks = lock_all_shards();  // readers hold one: hold them all
+      reserve_range();                       // may throw: nothing changed yet
+      to_compact = close_open_range();
+      ranges_.push_back(r.get());  // the largest first: still sorted
+      open_ = r.release();
+    }
+    live_.fetch_add(n, std::memory_order_relaxed);
+    next_.store(first + n, std::memory_order_release);
+    out = {first, open_};
+    // Full: an ordinary range from now on, which compact may free.
+    if (first + n == open_->first + open_->n) open_ = nullptr;
+  }
+  compact(to_compact);
+  return out;
+}
+
+TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> order) {
+  const std::size_t n = order.size();
+  if (n < range_min) return issue(n);
+  std::uint64_t to_compact = no_range;
+  Issued out;
+  {
+    std::lock_guard issuing(issue_mutex_);
+    const std::uint64_t first = next_.load(std::memory_order_relaxed);
+    // The counts are those of [first, first + n) whatever the order.
+    std::unique_ptr<TicketRange> r = make_range(first, static_cast<std::uint32_t>(n));
+    r->position = std::make_unique_for_overwrite<std::uint32_t[]>(n);
+    for (std::uint32_t k = 0; k < n; ++k) {
+      r->slots[k].key = first + order[k] + 1;
+      r->position[order[k]] = k;
+    }
+    {
+      const auto locks = lock_all_shards();  // readers hold one: hold them all
+      reserve_range();                       // may throw: nothing changed yet
+      to_compact = close_open_range();       // its tickets end where these begin
+      ranges_.push_back(r.get());            // the largest first: still sorted
+    }
+    out = {first, r.release()};
+    live_.fetch_add(n, std::memory_order_relaxed);
+    next_.store(first + n, std::memory_order_release);
+  }
+  compact(to_compact);
+  return out;
 }
 
 TicketView TicketTable::claim_undo(std::uint64_t t, const StableArray<VertexRec>& verts) {

@@ -8,26 +8,35 @@
 // Memory follows what can still be referenced, not what was ever submitted:
 // a slot is erased when its undo has run, and slots whose vertex is gone
 // (removed by handle or id) are swept once they outnumber the live vertices.
-// Tickets issued one at a time (and small batches) have their slots in 16
-// shards (ticket mod 16), each an open-addressing table with backward-shift
-// deletion under its own mutex; a shard's consecutive tickets four to an
-// aligned group of slots (home_slot in tickets.cpp). 16, not more: a finish holds its shard for
-// one find, and at 1M live tickets a shard's slots fill 4 MiB, large enough
-// for huge pages (SlotAllocator, when advised).
-// A large batch (issue_ordered) gets a range instead (TicketRange): its slots
-// in the order the engine runs its insertions (spatial, not ticket order),
-// so that the workers finishing them write memory nearly in sequence rather
-// than one random slot (a cache and TLB miss) each, and a table from ticket
-// to slot for the lookups by ticket. A range's slot is guarded by its
-// ticket's shard mutex like a hashed one; the list of ranges changes only
-// with every shard mutex held, so any one held shard mutex keeps it still.
+// Issued tickets get ranges of slots (TicketRange). A large batch
+// (issue_ordered) gets one of its own, its slots in the order the engine
+// runs its insertions (spatial, not ticket order), so that the workers
+// finishing them write memory nearly in sequence rather than one random
+// slot (a cache and TLB miss) each, with a table from ticket to slot for the
+// lookups by ticket. Tickets issued one at a time (and small batches) are
+// given out of the open range: a range of open_range_size slots in ticket
+// order, made ahead and keyed when made, so that issuing one takes no shard
+// lock and writes no slot, and the slots of the tickets in flight lie
+// together. The next large batch, or a request that does not fit, closes it
+// (shrinks it to the tickets it gave out). A range's slot is guarded by its
+// ticket's shard mutex; the list of ranges changes only with every shard
+// mutex held, so any one held shard mutex keeps it still.
 // Once at most an eighth of a range's tickets are live and none is pending,
 // the live ones move to the shards and the range goes (compact), so memory
-// still follows what can be referenced.
+// still follows what can be referenced. The shards: 16 (ticket mod 16), each
+// an open-addressing table with backward-shift deletion under its own mutex,
+// holding the compacted tickets; a shard's consecutive tickets four to an
+// aligned group of slots (home_slot in tickets.cpp). At 1M live tickets a
+// shard's slots fill 4 MiB, large enough for huge pages (SlotAllocator,
+// when advised).
 // Invariants: a slot exists for every ticket issued and not released (a
 // range's released slot has key 0); pending slots are never swept; a parked
 // undo exists only on a pending slot; a range with a pending slot is never
 // compacted (an insertion's TicketPosition points into it until it finishes).
+// The open range, if any, is the last range; its slots past the tickets
+// issued are keyed and counted live and pending (so it is never compacted
+// while open), and no lookup reaches them: every lookup by ticket is of a
+// ticket issued (claim_undo and result check, the rest are the engine's own).
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -66,12 +75,16 @@ struct TicketSlot {
 
 inline constexpr unsigned ticket_shards = 16;
 
-// The slots of a large batch's tickets [first, first + n), in run order.
+// The slots of tickets [first, first + n): a large batch's in run order, or
+// the open range's in ticket order (position null).
 struct TicketRange {
   std::uint64_t first = 0;
   std::uint32_t n = 0;
-  std::unique_ptr<TicketSlot[]> slots;        // slot k: the k-th ticket to run
-  std::unique_ptr<std::uint32_t[]> position;  // position[t - first]: t's slot
+  std::unique_ptr<TicketSlot[]> slots;        // slot k: the k-th ticket to run (ticket first + k if no position)
+  std::unique_ptr<std::uint32_t[]> position;  // position[t - first]: t's slot; null: slot t - first
+  std::uint32_t slot_of(std::uint64_t t) const {
+    return position ? position[t - first] : static_cast<std::uint32_t>(t - first);
+  }
   // Of the range's tickets t with t % ticket_shards == j: how many are live
   // (not released) and how many pending, in counts[j]; written under shard
   // j's mutex, read without it (relaxed) to decide whether to compact. One
@@ -108,31 +121,33 @@ class TicketTable {
   TicketTable& operator=(const TicketTable&) = delete;
   ~TicketTable();
 
-  // Issues n consecutive tickets; returns the first. Throws std::bad_alloc
-  // (and issues none) if a shard cannot grow.
-  std::uint64_t issue(std::uint64_t n);
-  // Issues order.size() consecutive tickets that will run in this order: the
-  // k-th to run is ticket first + order[k] (order: a permutation of 0..n-1).
-  // From range_min tickets on they get a range, returned (else null: hashed
-  // like issue's), whose slot k is that ticket's. Throws std::bad_alloc (and
-  // issues none).
-  static constexpr std::size_t range_min = 1024;
   struct Issued {
     std::uint64_t first = 0;
-    TicketRange* range = nullptr;
+    TicketRange* range = nullptr;  // where their slots are: ticket t's is range->slot_of(t)
   };
+  // Issues n consecutive tickets (1 <= n < 2^31) out of the open range, a
+  // new one if it has no room for them. Throws std::bad_alloc (and issues
+  // none) if a new range cannot be made.
+  static constexpr std::uint32_t open_range_size = 4096;
+  Issued issue(std::uint64_t n);
+  // Issues order.size() consecutive tickets that will run in this order: the
+  // k-th to run is ticket first + order[k] (order: a permutation of 0..n-1).
+  // From range_min tickets on they get a range of their own, whose slot k is
+  // that ticket's (position set); fewer are issued as issue's. Throws
+  // std::bad_alloc (and issues none).
+  static constexpr std::size_t range_min = 1024;
   Issued issue_ordered(std::span<const std::uint32_t> order);
   // Tickets whose slots are in ranges now (for tests).
   std::size_t ranged() const;
   std::uint64_t issued() const { return next_.load(std::memory_order_relaxed); }
   std::uint64_t live() const { return live_.load(std::memory_order_relaxed); }
-  // Fetches the cache line where t's slot most likely is (its home), without
-  // the shard's lock: an insertion calls it when it starts, so that
-  // finish_inserted, microseconds later, does not wait for memory (the slots
-  // are scattered by hash and a batch finishes in spatial, not ticket, order).
-  // A hint only: it reads nothing, and may fetch a stale line while the shard
-  // is being resized.
-  void prefetch(std::uint64_t t) const;
+  // Fetches the cache line of the slot at `at`, without the shard's lock: an
+  // insertion calls it when it starts, so that finish_inserted, microseconds
+  // later, does not wait for memory (the engine finishes insertions in
+  // spatial, not ticket, order). A hint only: it reads nothing.
+  static void prefetch(TicketPosition at) {
+    if (at.range) __builtin_prefetch(&at.range->slots[at.k], 1);
+  }
 
   // Claims the undo of t; throws pdt::Error(unknown_vertex) for a ticket
   // never issued, released, already undone, or whose insertion failed or
@@ -179,13 +194,7 @@ class TicketTable {
     mutable std::mutex mutex;
     std::vector<Slot, SlotAllocator<Slot>> slots;  // power of two (or empty), at most half full
     std::size_t count = 0;
-    // slots.data() and slots.size() - 1 for prefetch(), which reads them
-    // without the mutex; written under it whenever slots is replaced. On a
-    // line of their own: a worker reads them for each insertion while a
-    // submitter writes count and the mutex for each ticket it issues.
-    alignas(64) std::atomic<std::uintptr_t> prefetch_base{0};
-    std::atomic<std::size_t> prefetch_mask{0};
-    alignas(64) std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
+    std::unordered_map<std::uint64_t, std::exception_ptr> errors;  // failed insertions
     Slot* find(std::uint64_t t);
     const Slot* find(std::uint64_t t) const;
     void insert(std::uint64_t t);  // room must exist
@@ -213,6 +222,17 @@ class TicketTable {
   // another thread may have compacted it meanwhile. Takes issue_mutex_, then
   // every shard mutex.
   void compact(std::uint64_t first);
+  // A range of n slots for tickets [first, first + n), keyed, all counted
+  // live and pending; position null (ticket order). Throws std::bad_alloc.
+  static std::unique_ptr<TicketRange> make_range(std::uint64_t first, std::uint32_t n);
+  // Shrinks the open range to the tickets it gave out (erasing it if none)
+  // and forgets it. The caller holds issue_mutex_ and every shard mutex.
+  // Returns the range's first ticket if it is now worth compacting, else
+  // no_range.
+  std::uint64_t close_open_range();
+  // Room for one more range in ranges_ (doubling). The caller holds every
+  // shard mutex. Throws std::bad_alloc.
+  void reserve_range();
   // Every shard mutex, taken in index order (after issue_mutex_ where that is
   // taken too): what changing ranges_ needs, and a sweep of the ranges.
   std::array<std::unique_lock<std::mutex>, shard_count> lock_all_shards() const;
@@ -227,10 +247,14 @@ class TicketTable {
   // By first ticket. Changed (issue_ordered, compact) only with every shard
   // mutex held; read with any one held.
   std::vector<TicketRange*> ranges_;
+  // The range single tickets are issued from, or null (none yet, or the
+  // last one filled up); ranges_.back() if set, and never full. Read and
+  // written under issue_mutex_.
+  TicketRange* open_ = nullptr;
   std::atomic<std::uint64_t> next_{0};
   std::atomic<std::uint64_t> live_{0};
   std::atomic<std::uint64_t> sweep_at_{1 << 16};
-  std::mutex issue_mutex_;
+  mutable std::mutex issue_mutex_;
 };
 
 }  // namespace pdt::detail

@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 // The engine's ticket table (lib/tickets.hpp) on its own: a large batch's
-// tickets live in a range whose slots follow the run order; every lookup by
-// ticket finds them there; once most are released and none is pending the
-// range is compacted into the hashed shards, and the live tickets keep their
-// state; tickets whose vertex is gone are swept from ranges too.
+// tickets live in a range whose slots follow the run order; single tickets
+// and small batches come out of the open range, in ticket order, which a
+// large batch closes; every lookup by ticket finds them there; once most are
+// released and none is pending a range is compacted into the hashed shards,
+// and the live tickets keep their state; tickets whose vertex is gone are
+// swept from ranges too.
 #include <catch2/catch.hpp>
 
 #include <numeric>
@@ -18,6 +20,7 @@
 
 using pdt::detail::StableArray;
 using pdt::detail::TicketPosition;
+using pdt::detail::TicketRange;
 using pdt::detail::TicketState;
 using pdt::detail::TicketTable;
 using pdt::detail::VertexRec;
@@ -56,24 +59,33 @@ pdt::ErrorCode error_of(const std::function<void()>& f) {
 
 }  // namespace
 
-TEST_CASE("tickets: a small batch is hashed, a large one gets a range in run order", "[tickets]") {
+TEST_CASE("tickets: a small batch and single tickets come from the open range, a large batch gets a range in run order",
+          "[tickets]") {
   TicketTable table;
   const std::size_t small = TicketTable::range_min - 1, large = 4 * TicketTable::range_min + 5;
+  Vertices v(large);
   const TicketTable::Issued a = table.issue_ordered(run_order(small, 1));
-  REQUIRE(a.range == nullptr);
+  REQUIRE(a.range != nullptr);
+  REQUIRE(a.range->position == nullptr);  // ticket order
   REQUIRE(a.first == 0);
-  REQUIRE(table.ranged() == 0);
-  const std::uint64_t single = table.issue(1);
-  REQUIRE(single == small);
+  REQUIRE(table.ranged() == small);
+  const TicketTable::Issued single = table.issue(1);
+  REQUIRE(single.first == small);
+  REQUIRE(single.range == a.range);
+  REQUIRE(single.range->slot_of(single.first) == small);
+  // The open range's next slot is no insertion yet.
+  REQUIRE(error_of([&] { (void)table.result(small + 1, v.verts); }) == pdt::ErrorCode::invalid_argument);
+  REQUIRE(error_of([&] { (void)table.claim_undo(small + 1, v.verts); }) == pdt::ErrorCode::unknown_vertex);
   const std::vector<std::uint32_t> order = run_order(large, 2);
   const TicketTable::Issued b = table.issue_ordered(order);
   REQUIRE(b.range != nullptr);
-  REQUIRE(b.first == small + 1);
-  REQUIRE(table.ranged() == large);
+  REQUIRE(b.range != a.range);
+  REQUIRE(b.first == small + 1);  // consecutive: the open range was closed after its last ticket
+  REQUIRE(a.range->n == small + 1);
+  REQUIRE(table.ranged() == small + 1 + large);
   REQUIRE(table.issued() == small + 1 + large);
   REQUIRE(table.live() == small + 1 + large);
 
-  Vertices v(large);
   // Finish the range's tickets in run order, each at its position; a few by
   // lookup alone (no position), as a finish without a hint would.
   for (std::uint32_t k = 0; k < large; ++k) {
@@ -90,7 +102,85 @@ TEST_CASE("tickets: a small batch is hashed, a large one gets a range in run ord
   }
   // Out of range, before and after.
   REQUIRE(error_of([&] { (void)table.result(table.issued(), v.verts); }) == pdt::ErrorCode::invalid_argument);
-  REQUIRE(table.view(single).state == TicketState::pending);
+  REQUIRE(table.view(single.first).state == TicketState::pending);
+  // The next single ticket opens a new range after the batch.
+  const TicketTable::Issued next = table.issue(1);
+  REQUIRE(next.first == small + 1 + large);
+  REQUIRE(next.range != a.range);
+  REQUIRE(next.range != b.range);
+  REQUIRE(next.range->slot_of(next.first) == 0);
+  REQUIRE(table.ranged() == small + 2 + large);
+}
+
+TEST_CASE("tickets: one at a time they fill open ranges in ticket order; a full range compacts, the open one waits",
+          "[tickets]") {
+  TicketTable table;
+  const std::uint32_t size = TicketTable::open_range_size;
+  const std::size_t n = 2 * size + 100;  // two full ranges and the open one's first 100
+  Vertices v(n);
+  std::vector<TicketTable::Issued> issued;
+  for (std::size_t t = 0; t < n; ++t) {
+    issued.push_back(table.issue(1));
+    REQUIRE(issued.back().first == t);
+    REQUIRE(issued.back().range->slot_of(t) == t % size);
+    REQUIRE(issued.back().range == issued[t - t % size].range);
+  }
+  REQUIRE(issued[0].range != issued[size].range);
+  REQUIRE(table.ranged() == n);
+  REQUIRE(table.live() == n);
+  REQUIRE(error_of([&] { (void)table.claim_undo(n, v.verts); }) == pdt::ErrorCode::unknown_vertex);
+  // Finished in a scattered order at their positions, some by lookup alone.
+  const std::vector<std::uint32_t> order = run_order(n, 6);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::uint32_t t = order[k];
+    const TicketPosition at = k % 89 == 0 ? TicketPosition{} : TicketPosition{issued[t].range, issued[t].range->slot_of(t)};
+    REQUIRE(table.finish_inserted(t, t + 1, true, 1000 + t + 1, at) == nullptr);
+  }
+  for (std::uint32_t t = 0; t < n; ++t) REQUIRE(table.result(t, v.verts).vertex == t + 1);
+  // Undo all but every 16th: the full ranges go to the shards; the open one,
+  // whose tickets not given out count as pending, stays.
+  for (std::uint32_t t = 0; t < n; ++t) {
+    if (t % 16 == 0) continue;
+    REQUIRE(table.claim_undo(t, v.verts).vertex == t + 1);
+    table.release(t);
+  }
+  REQUIRE(table.ranged() == 100);
+  REQUIRE(table.live() == (n + 15) / 16);
+  // A large batch closes it: 7 of its 100 live, none pending: compacted.
+  const TicketTable::Issued b = table.issue_ordered(run_order(TicketTable::range_min, 7));
+  REQUIRE(b.first == n);
+  REQUIRE(table.ranged() == TicketTable::range_min);
+  for (std::uint32_t t = 0; t < n; ++t) {
+    if (t % 16 == 0)
+      REQUIRE(table.result(t, v.verts).vertex == t + 1);
+    else
+      REQUIRE(error_of([&] { (void)table.result(t, v.verts); }) == pdt::ErrorCode::invalid_argument);
+  }
+}
+
+TEST_CASE("tickets: an open range filled to its last slot is an ordinary one: compacted, and the next ticket opens another",
+          "[tickets]") {
+  TicketTable table;
+  const std::uint32_t size = TicketTable::open_range_size;
+  Vertices v(size);
+  TicketRange* first_range = nullptr;
+  for (std::uint32_t t = 0; t < size; ++t) {
+    const TicketTable::Issued i = table.issue(1);
+    if (t == 0) first_range = i.range;
+    REQUIRE(i.range == first_range);
+    REQUIRE(table.finish_inserted(t, t + 1, true, 1000 + t + 1, {i.range, t}) == nullptr);
+  }
+  for (std::uint32_t t = 0; t < size; ++t) {
+    if (t % 16 == 0) continue;
+    (void)table.claim_undo(t, v.verts);
+    table.release(t);
+  }
+  REQUIRE(table.ranged() == 0);  // none pending, an eighth live: compacted
+  const TicketTable::Issued next = table.issue(1);
+  REQUIRE(next.first == size);
+  REQUIRE(next.range->slot_of(size) == 0);
+  REQUIRE(table.ranged() == 1);
+  for (std::uint32_t t = 0; t < size; t += 16) REQUIRE(table.result(t, v.verts).vertex == t + 1);
 }
 
 TEST_CASE("tickets: an undo parked on a pending ranged ticket comes back at its finish", "[tickets]") {

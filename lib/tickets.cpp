@@ -203,6 +203,14 @@ std::size_t TicketTable::ranged() const {
   return n;
 }
 
+std::size_t TicketTable::slots_allocated() const {
+  const auto locks = lock_all_shards();
+  std::size_t n = 0;
+  for (const TicketRange* r : ranges_) n += r->capacity;
+  for (const Shard& s : shards_) n += s.slots.size();
+  return n;
+}
+
 // ---------------------------------------------------------------------------
 // The table
 // ---------------------------------------------------------------------------
@@ -214,7 +222,7 @@ std::unique_ptr<TicketRange> TicketTable::make_range(std::uint64_t first, std::u
   PDT_FAULT_POINT("ticket range");
   auto r = std::make_unique<TicketRange>();
   r->first = first;
-  r->n = n;
+  r->n = r->capacity = n;
   r->slots = std::make_unique<Slot[]>(n);
   for (std::uint32_t k = 0; k < n; ++k) r->slots[k].key = first + k + 1;
   for (unsigned j = 0; j < shard_count; ++j) {  // how many t in [first, first + n) have t % 16 == j
@@ -232,6 +240,7 @@ std::uint64_t TicketTable::close_open_range() {
   if (!r) return no_range;
   assert(r == ranges_.back());
   open_ = nullptr;
+  open_size_ = open_range_min;
   const auto issued = static_cast<std::uint32_t>(next_.load(std::memory_order_relaxed) - r->first);
   for (std::uint32_t k = issued; k < r->n; ++k) {  // never given out: neither live nor pending
     const std::uint64_t t = r->first + k;
@@ -262,7 +271,7 @@ TicketTable::Issued TicketTable::issue(std::uint64_t n) {
     if (!open_ || first + n > open_->first + open_->n) {
       // Made before anything changes: a failure issues nothing.
       std::unique_ptr<TicketRange> r =
-          make_range(first, std::max(open_range_size, static_cast<std::uint32_t>(n)));
+          make_range(first, static_cast<std::uint32_t>(n <= open_size_ ? open_size_ : n + open_size_));
       const auto locks = lock_all_shards();  // readers hold one: hold them all
       reserve_range();                       // may throw: nothing changed yet
       to_compact = close_open_range();
@@ -273,7 +282,10 @@ TicketTable::Issued TicketTable::issue(std::uint64_t n) {
     next_.store(first + n, std::memory_order_release);
     out = {first, open_};
     // Full: an ordinary range from now on, which compact may free.
-    if (first + n == open_->first + open_->n) open_ = nullptr;
+    if (first + n == open_->first + open_->n) {
+      open_ = nullptr;
+      open_size_ = std::min(2 * open_size_, open_range_max);
+    }
   }
   compact(to_compact);
   return out;

@@ -14,11 +14,16 @@
 // finishing them write memory nearly in sequence rather than one random
 // slot (a cache and TLB miss) each, with a table from ticket to slot for the
 // lookups by ticket. Tickets issued one at a time (and small batches) are
-// given out of the open range: a range of open_range_size slots in ticket
-// order, made ahead and keyed when made, so that issuing one takes no shard
-// lock and writes no slot, and the slots of the tickets in flight lie
-// together. The next large batch, or a request that does not fit, closes it
-// (shrinks it to the tickets it gave out). A range's slot is guarded by its
+// given out of the open range: a range of slots in ticket order, made ahead
+// and keyed when made, so that issuing one takes no shard lock and writes no
+// slot, and the slots of the tickets in flight lie together. The next large
+// batch, or a request that does not fit, closes it (shrinks it to the
+// tickets it gave out). Its size starts at open_range_min and doubles, up
+// to open_range_max, each time one fills up; a close starts it again at
+// the minimum, so what a closed range leaves unused is at most its size:
+// 64 slots while single tickets and large batches alternate, and never more
+// than twice the tickets given out since the previous close. A request of n
+// tickets that the minimum size cannot hold gets a range of n more. A range's slot is guarded by its
 // ticket's shard mutex; the list of ranges changes only with every shard
 // mutex held, so any one held shard mutex keeps it still.
 // Once at most an eighth of a range's tickets are live and none is pending,
@@ -80,6 +85,7 @@ inline constexpr unsigned ticket_shards = 16;
 struct TicketRange {
   std::uint64_t first = 0;
   std::uint32_t n = 0;
+  std::uint32_t capacity = 0;  // slots allocated: n, or more once a close has shrunk n
   std::unique_ptr<TicketSlot[]> slots;        // slot k: the k-th ticket to run (ticket first + k if no position)
   std::unique_ptr<std::uint32_t[]> position;  // position[t - first]: t's slot; null: slot t - first
   std::uint32_t slot_of(std::uint64_t t) const {
@@ -126,9 +132,10 @@ class TicketTable {
     TicketRange* range = nullptr;  // where their slots are: ticket t's is range->slot_of(t)
   };
   // Issues n consecutive tickets (1 <= n < 2^31) out of the open range, a
-  // new one if it has no room for them. Throws std::bad_alloc (and issues
+  // new one (of open_size_ slots, or n + open_size_ if n is more) if it has
+  // no room for them. Throws std::bad_alloc (and issues
   // none) if a new range cannot be made.
-  static constexpr std::uint32_t open_range_size = 4096;
+  static constexpr std::uint32_t open_range_min = 64, open_range_max = 4096;
   Issued issue(std::uint64_t n);
   // Issues order.size() consecutive tickets that will run in this order: the
   // k-th to run is ticket first + order[k] (order: a permutation of 0..n-1).
@@ -137,8 +144,10 @@ class TicketTable {
   // std::bad_alloc (and issues none).
   static constexpr std::size_t range_min = 1024;
   Issued issue_ordered(std::span<const std::uint32_t> order);
-  // Tickets whose slots are in ranges now (for tests).
+  // Tickets whose slots are in ranges now, and the slots allocated in all
+  // (ranges and shards), for tests.
   std::size_t ranged() const;
+  std::size_t slots_allocated() const;
   std::uint64_t issued() const { return next_.load(std::memory_order_relaxed); }
   std::uint64_t live() const { return live_.load(std::memory_order_relaxed); }
   // Fetches the cache line of the slot at `at`, without the shard's lock: an
@@ -251,6 +260,7 @@ class TicketTable {
   // last one filled up); ranges_.back() if set, and never full. Read and
   // written under issue_mutex_.
   TicketRange* open_ = nullptr;
+  std::uint32_t open_size_ = open_range_min;  // the next open range's size (issue_mutex_)
   std::atomic<std::uint64_t> next_{0};
   std::atomic<std::uint64_t> live_{0};
   std::atomic<std::uint64_t> sweep_at_{1 << 16};

@@ -112,20 +112,37 @@ TEST_CASE("tickets: a small batch and single tickets come from the open range, a
   REQUIRE(table.ranged() == small + 2 + large);
 }
 
-TEST_CASE("tickets: one at a time they fill open ranges in ticket order; a full range compacts, the open one waits",
+TEST_CASE("tickets: one at a time they fill open ranges in ticket order, each twice the last up to a maximum; a full "
+          "range compacts, the open one waits",
           "[tickets]") {
   TicketTable table;
-  const std::uint32_t size = TicketTable::open_range_size;
-  const std::size_t n = 2 * size + 100;  // two full ranges and the open one's first 100
+  std::vector<std::uint32_t> sizes;  // the ranges' sizes, as they fill: 64, 128, ..., max, max
+  for (std::uint32_t size = TicketTable::open_range_min; size < TicketTable::open_range_max; size *= 2)
+    sizes.push_back(size);
+  sizes.push_back(TicketTable::open_range_max);
+  sizes.push_back(TicketTable::open_range_max);
+  std::size_t full = 0;
+  for (std::uint32_t size : sizes) full += size;
+  const std::size_t n = full + 100;  // then the next open range's first 100
   Vertices v(n);
   std::vector<TicketTable::Issued> issued;
+  std::vector<std::uint32_t> seen;  // sizes of the ranges filled, in order
   for (std::size_t t = 0; t < n; ++t) {
     issued.push_back(table.issue(1));
-    REQUIRE(issued.back().first == t);
-    REQUIRE(issued.back().range->slot_of(t) == t % size);
-    REQUIRE(issued.back().range == issued[t - t % size].range);
+    const TicketTable::Issued& i = issued.back();
+    REQUIRE(i.first == t);
+    if (t > 0 && i.range == issued[t - 1].range) {
+      REQUIRE(i.range->slot_of(t) == i.range->slot_of(t - 1) + 1);
+    } else {
+      REQUIRE(i.range->slot_of(t) == 0);
+      if (t > 0) {
+        const TicketRange* last = issued[t - 1].range;
+        REQUIRE(last->slot_of(t - 1) + 1 == last->n);  // filled to its last slot
+        seen.push_back(last->n);
+      }
+    }
   }
-  REQUIRE(issued[0].range != issued[size].range);
+  REQUIRE(seen == sizes);
   REQUIRE(table.ranged() == n);
   REQUIRE(table.live() == n);
   REQUIRE(error_of([&] { (void)table.claim_undo(n, v.verts); }) == pdt::ErrorCode::unknown_vertex);
@@ -156,12 +173,16 @@ TEST_CASE("tickets: one at a time they fill open ranges in ticket order; a full 
     else
       REQUIRE(error_of([&] { (void)table.result(t, v.verts); }) == pdt::ErrorCode::invalid_argument);
   }
+  // The next open range starts again at the smallest size.
+  const TicketTable::Issued next = table.issue(1);
+  REQUIRE(next.range->slot_of(next.first) == 0);
+  REQUIRE(next.range->n == TicketTable::open_range_min);
 }
 
 TEST_CASE("tickets: an open range filled to its last slot is an ordinary one: compacted, and the next ticket opens another",
           "[tickets]") {
   TicketTable table;
-  const std::uint32_t size = TicketTable::open_range_size;
+  const std::uint32_t size = TicketTable::open_range_min;  // the first open range's
   Vertices v(size);
   TicketRange* first_range = nullptr;
   for (std::uint32_t t = 0; t < size; ++t) {
@@ -175,12 +196,29 @@ TEST_CASE("tickets: an open range filled to its last slot is an ordinary one: co
     (void)table.claim_undo(t, v.verts);
     table.release(t);
   }
-  REQUIRE(table.ranged() == 0);  // none pending, an eighth live: compacted
+  REQUIRE(table.ranged() == 0);  // none pending, an eighth live or less: compacted
   const TicketTable::Issued next = table.issue(1);
   REQUIRE(next.first == size);
   REQUIRE(next.range->slot_of(size) == 0);
   REQUIRE(table.ranged() == 1);
   for (std::uint32_t t = 0; t < size; t += 16) REQUIRE(table.result(t, v.verts).vertex == t + 1);
+}
+
+TEST_CASE("tickets: single tickets and large batches alternating leave at most the smallest open range unused each time",
+          "[tickets]") {
+  TicketTable table;
+  const std::size_t rounds = 40;
+  std::size_t batch_tickets = 0;
+  for (std::size_t round = 0; round < rounds; ++round) {
+    const TicketTable::Issued single = table.issue(1);
+    REQUIRE(single.range->n == TicketTable::open_range_min);
+    const TicketTable::Issued b = table.issue_ordered(run_order(TicketTable::range_min, static_cast<unsigned>(round)));
+    REQUIRE(b.first == single.first + 1);
+    REQUIRE(single.range->n == 1);  // closed at its one ticket
+    batch_tickets += TicketTable::range_min;
+  }
+  REQUIRE(table.issued() == rounds + batch_tickets);
+  REQUIRE(table.slots_allocated() == batch_tickets + rounds * TicketTable::open_range_min);
 }
 
 TEST_CASE("tickets: an undo parked on a pending ranged ticket comes back at its finish", "[tickets]") {

@@ -375,35 +375,53 @@ OpRecord* TicketTable::park(std::uint64_t t, OpRecord* undo) {
 
 OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp,
                                        TicketPosition at) {
-  Shard& s = shard(t);
-  std::lock_guard lock(s.mutex);
-  TicketRange* range = nullptr;
-  Slot* slot = find(t, at, &range);
-  if (range) decrement(range->counts[t % shard_count].pending);
-  slot->state = TicketState::inserted;
-  slot->vertex = v;
-  slot->inserted = inserted;
-  slot->stamp = stamp;
-  OpRecord* undo = slot->parked;
-  slot->parked = nullptr;
+  OpRecord* undo = nullptr;
+  std::uint64_t to_compact = no_range;
+  {
+    Shard& s = shard(t);
+    std::lock_guard lock(s.mutex);
+    TicketRange* range = nullptr;
+    Slot* slot = find(t, at, &range);
+    if (range) to_compact = finished_in(*range, t);
+    slot->state = TicketState::inserted;
+    slot->vertex = v;
+    slot->inserted = inserted;
+    slot->stamp = stamp;
+    undo = slot->parked;
+    slot->parked = nullptr;
+  }
+  compact(to_compact);
   return undo;
 }
 
 OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error, TicketPosition at) {
-  Shard& s = shard(t);
-  std::lock_guard lock(s.mutex);
-  TicketRange* range = nullptr;
-  Slot* slot = find(t, at, &range);
-  if (range) decrement(range->counts[t % shard_count].pending);
-  slot->state = TicketState::failed;
-  OpRecord* undo = slot->parked;
-  slot->parked = nullptr;
-  try {
-    s.errors[t] = std::move(error);
-  } catch (...) {
-    // No room to keep the error: insertion_result(t) will say it failed without it.
+  OpRecord* undo = nullptr;
+  std::uint64_t to_compact = no_range;
+  {
+    Shard& s = shard(t);
+    std::lock_guard lock(s.mutex);
+    TicketRange* range = nullptr;
+    Slot* slot = find(t, at, &range);
+    if (range) to_compact = finished_in(*range, t);
+    slot->state = TicketState::failed;
+    undo = slot->parked;
+    slot->parked = nullptr;
+    try {
+      s.errors[t] = std::move(error);
+    } catch (...) {
+      // No room to keep the error: insertion_result(t) will say it failed without it.
+    }
   }
+  compact(to_compact);
   return undo;
+}
+
+std::uint64_t TicketTable::finished_in(TicketRange& range, std::uint64_t t) {
+  std::atomic<std::uint32_t>& pending = range.counts[t % shard_count].pending;
+  decrement(pending);
+  // Looked at only when this shard's share runs out (16 times a range), not
+  // at every finish: mostly_released reads every shard's counts.
+  return pending.load(std::memory_order_relaxed) == 0 && range.mostly_released() ? range.first : no_range;
 }
 
 void TicketTable::release(std::uint64_t t) {

@@ -26,9 +26,11 @@
 // tickets that the minimum size cannot hold gets a range of n more. A range's slot is guarded by its
 // ticket's shard mutex; the list of ranges changes only with every shard
 // mutex held, so any one held shard mutex keeps it still.
-// Once at most an eighth of a range's tickets are live and none is pending,
-// the live ones move to the shards and the range goes (compact), so memory
-// still follows what can be referenced. The shards: 16 (ticket mod 16), each
+// Once at most an eighth of a range's slots hold live tickets and none is
+// pending, the live ones move to the shards and the range goes (compact), so
+// memory still follows what can be referenced. Whatever makes that so checks
+// it: an erase, a sweep, a close, and a finish that leaves a range's share of
+// a shard with none pending. The shards: 16 (ticket mod 16), each
 // an open-addressing table with backward-shift deletion under its own mutex,
 // holding the compacted tickets; a shard's consecutive tickets four to an
 // aligned group of slots (home_slot in tickets.cpp). At 1M live tickets a
@@ -110,8 +112,9 @@ struct TicketRange {
     return false;
   }
   // Worth compacting: none pending (TicketPosition may point into it until
-  // then) and at most an eighth live.
-  bool mostly_released() const { return !any_pending() && live_now() <= n / 8; }
+  // then) and at most an eighth of its slots live: of those allocated, not
+  // n, so that a range closed after a few tickets goes once they finish.
+  bool mostly_released() const { return !any_pending() && live_now() <= capacity / 8; }
 };
 
 // Where a ranged ticket's slot is: for finish_*, which then need no lookup.
@@ -225,6 +228,10 @@ class TicketTable {
   // to compact after letting the mutex go.
   static constexpr std::uint64_t no_range = ~std::uint64_t{0};
   std::uint64_t erase(std::uint64_t t, Slot* slot);
+  // Counts t (of `range`) as no longer pending; the caller holds
+  // shard(t).mutex. Returns the range's first ticket when it is now worth
+  // compacting (no_range if not), for compact once the mutex is let go.
+  static std::uint64_t finished_in(TicketRange& range, std::uint64_t t);
   // Moves the live slots of the range starting at ticket `first` to the
   // shards and frees it, if it still exists and is mostly_released() (else,
   // or if the shards cannot grow, nothing happens). By ticket, not pointer:

@@ -221,6 +221,41 @@ TEST_CASE("tickets: single tickets and large batches alternating leave at most t
   REQUIRE(table.slots_allocated() == batch_tickets + rounds * TicketTable::open_range_min);
 }
 
+TEST_CASE("tickets: a range closed after a few tickets is judged by the slots it holds: its live ticket moves to the "
+          "shards once finished",
+          "[tickets]") {
+  TicketTable table;
+  Vertices v(2);
+  // Open ranges of 64, 128, ... up to half the largest size, each filled,
+  // finished and undone (so compacted away): the next one has the largest.
+  std::uint64_t t = 0;
+  for (std::uint32_t size = TicketTable::open_range_min; size < TicketTable::open_range_max; size *= 2)
+    for (std::uint32_t k = 0; k < size; ++k, ++t) {
+      const TicketTable::Issued i = table.issue(1);
+      REQUIRE(i.first == t);
+      table.finish_inserted(t, 1, true, 1001, {i.range, i.range->slot_of(t)});
+      (void)table.claim_undo(t, v.verts);
+      table.release(t);
+    }
+  REQUIRE(table.ranged() == 0);
+  const TicketTable::Issued kept = table.issue(1);
+  REQUIRE(kept.range->capacity == TicketTable::open_range_max);
+  const std::vector<std::uint32_t> order = run_order(TicketTable::range_min, 9);
+  const TicketTable::Issued b = table.issue_ordered(order);  // closes the open range at its one ticket, pending
+  REQUIRE(kept.range->n == 1);
+  for (std::uint32_t k = 0; k < order.size(); ++k) {
+    table.finish_inserted(b.first + order[k], 1, true, 1001, {b.range, k});
+    (void)table.claim_undo(b.first + order[k], v.verts);
+    table.release(b.first + order[k]);
+  }
+  REQUIRE(table.ranged() == 1);  // the kept ticket's range: pending
+  REQUIRE(table.finish_inserted(kept.first, 2, true, 1002, {kept.range, 0}) == nullptr);
+  REQUIRE(table.ranged() == 0);  // one live of 4,096 slots: to the shards at its finish
+  REQUIRE(table.slots_allocated() <= 16 * 16);  // each shard's smallest table, not the range's 4,096
+  REQUIRE(table.result(kept.first, v.verts).vertex == 2);
+  REQUIRE(table.claim_undo(kept.first, v.verts).vertex == 2);
+}
+
 TEST_CASE("tickets: an undo parked on a pending ranged ticket comes back at its finish", "[tickets]") {
   TicketTable table;
   const std::size_t n = TicketTable::range_min;

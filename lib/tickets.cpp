@@ -373,8 +373,8 @@ OpRecord* TicketTable::park(std::uint64_t t, OpRecord* undo) {
   return nullptr;
 }
 
-OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp,
-                                       TicketPosition at) {
+template <class Write>
+OpRecord* TicketTable::finish(std::uint64_t t, TicketPosition at, Write&& write) {
   OpRecord* undo = nullptr;
   std::uint64_t to_compact = no_range;
   {
@@ -383,10 +383,7 @@ OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserte
     TicketRange* range = nullptr;
     Slot* slot = find(t, at, &range);
     if (range) to_compact = finished_in(*range, t);
-    slot->state = TicketState::inserted;
-    slot->vertex = v;
-    slot->inserted = inserted;
-    slot->stamp = stamp;
+    write(*slot, s);
     undo = slot->parked;
     slot->parked = nullptr;
   }
@@ -394,26 +391,25 @@ OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserte
   return undo;
 }
 
+OpRecord* TicketTable::finish_inserted(std::uint64_t t, VertexId v, bool inserted, std::uint64_t stamp,
+                                       TicketPosition at) {
+  return finish(t, at, [&](Slot& slot, Shard&) {
+    slot.state = TicketState::inserted;
+    slot.vertex = v;
+    slot.inserted = inserted;
+    slot.stamp = stamp;
+  });
+}
+
 OpRecord* TicketTable::finish_failed(std::uint64_t t, std::exception_ptr error, TicketPosition at) {
-  OpRecord* undo = nullptr;
-  std::uint64_t to_compact = no_range;
-  {
-    Shard& s = shard(t);
-    std::lock_guard lock(s.mutex);
-    TicketRange* range = nullptr;
-    Slot* slot = find(t, at, &range);
-    if (range) to_compact = finished_in(*range, t);
-    slot->state = TicketState::failed;
-    undo = slot->parked;
-    slot->parked = nullptr;
+  return finish(t, at, [&](Slot& slot, Shard& s) {
+    slot.state = TicketState::failed;
     try {
       s.errors[t] = std::move(error);
     } catch (...) {
       // No room to keep the error: insertion_result(t) will say it failed without it.
     }
-  }
-  compact(to_compact);
-  return undo;
+  });
 }
 
 std::uint64_t TicketTable::finished_in(TicketRange& range, std::uint64_t t) {

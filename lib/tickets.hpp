@@ -232,6 +232,10 @@ class TicketTable {
   // shard(t).mutex. Returns the range's first ticket when it is now worth
   // compacting (no_range if not), for compact once the mutex is let go.
   static std::uint64_t finished_in(TicketRange& range, std::uint64_t t);
+  // finish_inserted and finish_failed: t's slot, found under its shard's
+  // mutex, written by write(slot, shard); returns the undo parked on it.
+  template <class Write>
+  OpRecord* finish(std::uint64_t t, TicketPosition at, Write&& write);
   // Moves the live slots of the range starting at ticket `first` to the
   // shards and frees it, if it still exists and is mostly_released() (else,
   // or if the shards cannot grow, nothing happens). By ticket, not pointer:

@@ -218,13 +218,22 @@ void TicketTable::unknown(std::uint64_t t, const char* why) {
   throw Error(ErrorCode::unknown_vertex, "cannot undo insertion " + std::to_string(t) + ": " + why);
 }
 
-std::unique_ptr<TicketRange> TicketTable::make_range(std::uint64_t first, std::uint32_t n) {
+std::unique_ptr<TicketRange> TicketTable::make_range(std::uint64_t first, std::uint32_t n,
+                                                     const std::uint32_t* order) {
   PDT_FAULT_POINT("ticket range");
   auto r = std::make_unique<TicketRange>();
   r->first = first;
   r->n = r->capacity = n;
   r->slots = std::make_unique<Slot[]>(n);
-  for (std::uint32_t k = 0; k < n; ++k) r->slots[k].key = first + k + 1;
+  if (order) {
+    r->position = std::make_unique_for_overwrite<std::uint32_t[]>(n);
+    for (std::uint32_t k = 0; k < n; ++k) {
+      r->slots[k].key = first + order[k] + 1;
+      r->position[order[k]] = k;
+    }
+  } else {
+    for (std::uint32_t k = 0; k < n; ++k) r->slots[k].key = first + k + 1;
+  }
   for (unsigned j = 0; j < shard_count; ++j) {  // how many t in [first, first + n) have t % 16 == j
     const std::uint64_t from = first + (j + shard_count - first % shard_count) % shard_count;
     const auto count = static_cast<std::uint32_t>(from < first + n ? (first + n - from + shard_count - 1) / shard_count : 0);
@@ -248,17 +257,17 @@ std::uint64_t TicketTable::close_open_range() {
     decrement(r->counts[t % shard_count].pending);
     r->slots[k] = Slot{};
   }
+  assert(issued > 0);  // made by issue(), which gave out its first tickets at once
   r->n = issued;
-  if (issued == 0) {
-    ranges_.pop_back();
-    delete r;
-    return no_range;
-  }
   return r->mostly_released() ? r->first : no_range;
 }
 
-void TicketTable::reserve_range() {
-  if (ranges_.size() == ranges_.capacity()) ranges_.reserve(2 * ranges_.size() + 8);
+std::uint64_t TicketTable::add_range(std::unique_ptr<TicketRange> r) {
+  const auto locks = lock_all_shards();  // readers hold one: hold them all
+  if (ranges_.size() == ranges_.capacity()) ranges_.reserve(2 * ranges_.size() + 8);  // may throw: nothing changed yet
+  const std::uint64_t to_compact = close_open_range();  // its tickets end where r's begin
+  ranges_.push_back(r.release());  // the largest first: still sorted
+  return to_compact;
 }
 
 TicketTable::Issued TicketTable::issue(std::uint64_t n) {
@@ -272,11 +281,9 @@ TicketTable::Issued TicketTable::issue(std::uint64_t n) {
       // Made before anything changes: a failure issues nothing.
       std::unique_ptr<TicketRange> r =
           make_range(first, static_cast<std::uint32_t>(n <= open_size_ ? open_size_ : n + open_size_));
-      const auto locks = lock_all_shards();  // readers hold one: hold them all
-      reserve_range();                       // may throw: nothing changed yet
-      to_compact = close_open_range();
-      ranges_.push_back(r.get());  // the largest first: still sorted
-      open_ = r.release();
+      TicketRange* opened = r.get();
+      to_compact = add_range(std::move(r));
+      open_ = opened;
     }
     live_.fetch_add(n, std::memory_order_relaxed);
     next_.store(first + n, std::memory_order_release);
@@ -299,20 +306,9 @@ TicketTable::Issued TicketTable::issue_ordered(std::span<const std::uint32_t> or
   {
     std::lock_guard issuing(issue_mutex_);
     const std::uint64_t first = next_.load(std::memory_order_relaxed);
-    // The counts are those of [first, first + n) whatever the order.
-    std::unique_ptr<TicketRange> r = make_range(first, static_cast<std::uint32_t>(n));
-    r->position = std::make_unique_for_overwrite<std::uint32_t[]>(n);
-    for (std::uint32_t k = 0; k < n; ++k) {
-      r->slots[k].key = first + order[k] + 1;
-      r->position[order[k]] = k;
-    }
-    {
-      const auto locks = lock_all_shards();  // readers hold one: hold them all
-      reserve_range();                       // may throw: nothing changed yet
-      to_compact = close_open_range();       // its tickets end where these begin
-      ranges_.push_back(r.get());            // the largest first: still sorted
-    }
-    out = {first, r.release()};
+    std::unique_ptr<TicketRange> r = make_range(first, static_cast<std::uint32_t>(n), order.data());
+    out = {first, r.get()};
+    to_compact = add_range(std::move(r));
     live_.fetch_add(n, std::memory_order_relaxed);
     next_.store(first + n, std::memory_order_release);
   }

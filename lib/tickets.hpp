@@ -22,10 +22,11 @@
 // to open_range_max, each time one fills up; a close starts it again at
 // the minimum, so what a closed range leaves unused is at most its size:
 // 64 slots while single tickets and large batches alternate, and never more
-// than twice the tickets given out since the previous close. A request of n
-// tickets that the minimum size cannot hold gets a range of n more. A range's slot is guarded by its
-// ticket's shard mutex; the list of ranges changes only with every shard
-// mutex held, so any one held shard mutex keeps it still.
+// than twice the tickets given out since the previous close. A request of
+// more tickets than the open size gets a range of that many more. A range's
+// slot is guarded by its ticket's shard mutex; the list of ranges changes
+// only with every shard mutex held, so any one held shard mutex keeps it
+// still.
 // Once at most an eighth of a range's slots hold live tickets and none is
 // pending, the live ones move to the shards and the range goes (compact), so
 // memory still follows what can be referenced. Whatever makes that so checks
@@ -136,8 +137,8 @@ class TicketTable {
   };
   // Issues n consecutive tickets (1 <= n < 2^31) out of the open range, a
   // new one (of open_size_ slots, or n + open_size_ if n is more) if it has
-  // no room for them. Throws std::bad_alloc (and issues
-  // none) if a new range cannot be made.
+  // no room for them. Throws std::bad_alloc (and issues none) if a new range
+  // cannot be made.
   static constexpr std::uint32_t open_range_min = 64, open_range_max = 4096;
   Issued issue(std::uint64_t n);
   // Issues order.size() consecutive tickets that will run in this order: the
@@ -243,16 +244,20 @@ class TicketTable {
   // every shard mutex.
   void compact(std::uint64_t first);
   // A range of n slots for tickets [first, first + n), keyed, all counted
-  // live and pending; position null (ticket order). Throws std::bad_alloc.
-  static std::unique_ptr<TicketRange> make_range(std::uint64_t first, std::uint32_t n);
-  // Shrinks the open range to the tickets it gave out (erasing it if none)
-  // and forgets it. The caller holds issue_mutex_ and every shard mutex.
-  // Returns the range's first ticket if it is now worth compacting, else
-  // no_range.
+  // live and pending: in run order if `order` is given (slot k holds ticket
+  // first + order[k]; position set), else in ticket order (position null).
+  // Throws std::bad_alloc.
+  static std::unique_ptr<TicketRange> make_range(std::uint64_t first, std::uint32_t n,
+                                                 const std::uint32_t* order = nullptr);
+  // Shrinks the open range to the tickets it gave out and forgets it. The
+  // caller holds issue_mutex_ and every shard mutex. Returns the range's
+  // first ticket if it is now worth compacting, else no_range.
   std::uint64_t close_open_range();
-  // Room for one more range in ranges_ (doubling). The caller holds every
-  // shard mutex. Throws std::bad_alloc.
-  void reserve_range();
+  // Appends r (its tickets next after every issued one) to ranges_, closing
+  // the open range first, under every shard mutex; the caller holds
+  // issue_mutex_. Returns what close_open_range does. Throws std::bad_alloc
+  // (changing nothing, r freed) if ranges_ cannot grow.
+  std::uint64_t add_range(std::unique_ptr<TicketRange> r);
   // Every shard mutex, taken in index order (after issue_mutex_ where that is
   // taken too): what changing ranges_ needs, and a sweep of the ranges.
   std::array<std::unique_lock<std::mutex>, shard_count> lock_all_shards() const;
@@ -264,7 +269,7 @@ class TicketTable {
     return slot.state == TicketState::inserted && verts[slot.vertex].stamp.load(std::memory_order_relaxed) != slot.stamp;
   }
   Shard shards_[shard_count];
-  // By first ticket. Changed (issue_ordered, compact) only with every shard
+  // By first ticket. Changed (add_range, compact) only with every shard
   // mutex held; read with any one held.
   std::vector<TicketRange*> ranges_;
   // The range single tickets are issued from, or null (none yet, or the

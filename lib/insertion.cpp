@@ -218,24 +218,45 @@ constexpr auto cone_facets = [] {
 }  // namespace
 
 void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
-  // Replace the conflict zone by the cone from v over its boundary. Its cells
-  // are recycled first so the new cells reuse their memory. Nothing here
-  // allocates: the caller reserved the cells and the edge map.
-  for (CellId c : ctx.conflict_zone) {
+  // Replace the conflict zone by the cone from v over its boundary. The
+  // zone's ids go straight to the cone's first cells, each renewed (a new
+  // incarnation), rather than through the pool's free list; the pool gives
+  // the rest (an insertion's cone has more cells than its zone, so it rarely
+  // gets any back). Nothing here allocates: the caller reserved the cells and
+  // the edge map.
+  std::vector<CellId>& zone = ctx.conflict_zone;
+  const std::size_t facets = ctx.boundary.size();
+  const bool retiring = some_at_last_incarnation.load(std::memory_order_relaxed);
+  std::size_t kept = 0;  // zone[0, kept): the ids the cone takes over
+  for (const CellId c : zone) {
     if (!cell_infinite(c)) --ctx.d_finite_cells;
     note_destroyed(ctx, c);
-    free_cell(ctx, c);
+    if (kept < facets && !(retiring && incarnation(c) == last_incarnation))
+      zone[kept++] = c;
+    else
+      free_cell(ctx, c);  // retires an id at its last incarnation
   }
-  for (OpContext::BoundaryFacet& bf : ctx.boundary) {
-    bf.v[bf.facet] = v;
-    CellId nc = alloc_cell(ctx);
+  for (std::size_t k = 0; k < facets; ++k) {
+    OpContext::BoundaryFacet& bf = ctx.boundary[k];
+    CellId nc;
+    if (k < kept) {
+      nc = zone[k];
+      renew(nc);
+    } else {
+      nc = alloc_cell(ctx);
+    }
     note_created(ctx, nc);
     CellRec& r = cells[nc];
+    // bf.v whole into the cell, then v in place in both: the other order
+    // (v into bf.v, then the 16-byte copy) stalls each copy on a store that
+    // cannot be forwarded to a wider load.
     std::memcpy(r.v, bf.v, sizeof r.v);
+    r.v[bf.facet] = v;
+    bf.v[bf.facet] = v;
     set_adjacency(nc, bf.facet, bf.outer >> 2, static_cast<int>(bf.outer & 3));
     bool finite = true;
-    for (int k = 0; k < 4; ++k) {
-      const VertexId w = r.v[k];
+    for (int i = 0; i < 3; ++i) {  // the facet's vertices; v's own below
+      const VertexId w = bf.v[detail::facet_vertex[bf.facet][i]];
       if (w == 0) {
         finite = false;
         continue;
@@ -246,8 +267,10 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
     if (finite) ++ctx.d_finite_cells;
     bf.outer = nc;  // from here on: the new cell
   }
+  verts[v].cell = ctx.boundary.back().outer;
+  verts[v].scratch = 0;
   link_cone(ctx);
-  ctx.stats.cells_created_by_insert += ctx.boundary.size();
+  ctx.stats.cells_created_by_insert += facets;
 }
 
 void Triangulation::Impl::link_cone(OpContext& ctx) {
@@ -274,15 +297,18 @@ void Triangulation::Impl::link_cone(OpContext& ctx) {
       next += unnumbered;
     }
   if (next <= ids) {
+    // Rows of `next` entries, not `ids`: the table's used part is dense
+    // (next^2 entries, about 1 KB for a typical cone of 16 vertices).
     std::uint32_t* table = ctx.cone_edge.data();
+    const std::uint32_t stride = next;
     for (OpContext::BoundaryFacet& bf : bnd)
       for (VertexId& w : bf.v) w = verts[w].scratch;  // bf.v now holds numbers
     for (const OpContext::BoundaryFacet& bf : bnd)
       for (const ConeFacet& cf : cone_facets[bf.facet])
-        table[ids * bf.v[cf.x] + bf.v[cf.y]] = 4 * bf.outer + static_cast<std::uint32_t>(cf.k);
+        table[stride * bf.v[cf.x] + bf.v[cf.y]] = 4 * bf.outer + static_cast<std::uint32_t>(cf.k);
     for (const OpContext::BoundaryFacet& bf : bnd)
       for (const ConeFacet& cf : cone_facets[bf.facet]) {
-        const std::uint32_t across = table[ids * bf.v[cf.y] + bf.v[cf.x]];
+        const std::uint32_t across = table[stride * bf.v[cf.y] + bf.v[cf.x]];
         assert(cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.x] &&
                cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.y]);
         cells[bf.outer].n[cf.k] = across;

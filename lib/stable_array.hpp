@@ -23,6 +23,7 @@
 // T must be trivially destructible (storage is released without destructors).
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -102,6 +103,7 @@ class StableArray {
   // MADV_POPULATE_WRITE (before Linux 5.14) faults the pages in as before.
   void populate(std::size_t from, std::size_t to) {
 #ifdef MADV_POPULATE_WRITE
+    from = std::max(from, kept_);  // below kept_ the pages are committed already
     if (from >= to) return;
     constexpr std::uintptr_t page = 4096;
     const auto begin = reinterpret_cast<std::uintptr_t>(data_ + from) & ~(page - 1);
@@ -120,10 +122,17 @@ class StableArray {
     }
   }
   // Forgets every element; with release, also returns the committed pages to
-  // the OS (without, a scratch array reused per operation keeps its pages warm).
+  // the OS (without, a scratch array reused per operation keeps its pages warm,
+  // and populate skips them: a removal's small triangulation, cleared for each
+  // removal, made three page-table walks per removal otherwise).
   void clear(bool release = true) {
     std::size_t n = size_.exchange(0);
-    if (n && release) ::madvise(data_, n * sizeof(T), MADV_DONTNEED);
+    if (release) {
+      if (n) ::madvise(data_, n * sizeof(T), MADV_DONTNEED);
+      kept_ = 0;
+    } else {
+      kept_ = std::max(kept_, n);
+    }
   }
 
  private:
@@ -131,6 +140,11 @@ class StableArray {
   T* data_ = nullptr;
   std::size_t capacity_;
   std::atomic<std::size_t> size_{0};
+  // Elements [0, kept_) lie on pages that an earlier use committed and a
+  // clear(false) kept (populate is advice, so a wrong kept_ could only cost
+  // faults, never correctness). Written by clear() alone, which runs with no
+  // grow() or populate() beside it.
+  std::size_t kept_ = 0;
 };
 
 #else  // PDT_USE_MIMALLOC

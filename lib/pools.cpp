@@ -24,9 +24,15 @@ constexpr std::size_t max_vertices = std::size_t{1} << 29;
 constexpr std::size_t max_small_cells = std::size_t{1} << 24;
 constexpr std::size_t max_small_vertices = std::size_t{1} << 22;
 
-// Pool chunks (paper §3.2): 12 pages of cells, 3 pages of vertices.
+// Pool chunks (paper §3.2): 12 pages of cells, 3 pages of vertices. A
+// removal's small triangulation, cleared for every removal and carving its
+// storage again each time (a link of some 30 vertices, a few hundred cells),
+// carves 2 pages of cells and 1 of vertices: a whole chunk's records, reset
+// for each removal, were 60 KB of writes for a link that needs a few.
 constexpr std::uint32_t cell_chunk = 12 * 4096 / sizeof(detail::CellRec);
 constexpr std::uint32_t vertex_chunk = 3 * 4096 / sizeof(detail::VertexRec);
+constexpr std::uint32_t small_cell_chunk = 2 * 4096 / sizeof(detail::CellRec);
+constexpr std::uint32_t small_vertex_chunk = 4096 / sizeof(detail::VertexRec);
 
 // Free-list segments (storage.hpp): a context keeps fewer than 2S free ids
 // of a kind and trades the rest in segments of S with the spare stack.
@@ -179,7 +185,8 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
   // A new range of fresh ids, enough for n on its own (a large cavity can
   // need more than a list ever keeps); the ids left in the current range go
   // to the free list.
-  const std::size_t size = std::max<std::size_t>(1, (n + cell_chunk - 1) / cell_chunk) * cell_chunk;
+  const std::size_t chunk = is_small ? small_cell_chunk : cell_chunk;
+  const std::size_t size = std::max<std::size_t>(1, (n + chunk - 1) / chunk) * chunk;
   std::size_t first;
   for (;;) {
     PDT_FAULT_POINT("cell chunk");
@@ -251,10 +258,11 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
       // StableArray::grow. The small triangulation reuses its memory, and is
       // single-threaded, so it constructs.
       PDT_FAULT_POINT("vertex chunk");
-      std::size_t first = verts.grow(vertex_chunk, is_small);
-      verts.populate(first, first + vertex_chunk);
+      const std::size_t chunk = is_small ? small_vertex_chunk : vertex_chunk;
+      std::size_t first = verts.grow(chunk, is_small);
+      verts.populate(first, first + chunk);
       ctx.fresh_vertex = static_cast<std::uint32_t>(first);
-      ctx.fresh_vertex_end = static_cast<std::uint32_t>(first + vertex_chunk);
+      ctx.fresh_vertex_end = static_cast<std::uint32_t>(first + chunk);
     }
     VertexId f = ctx.fresh_vertex++;
     if (lock_exclusive(ctx, f)) {

@@ -220,21 +220,20 @@ constexpr auto cone_facets = [] {
 void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
   // Replace the conflict zone by the cone from v over its boundary. The
   // zone's ids go straight to the cone's first cells, each renewed (a new
-  // incarnation), rather than through the pool's free list; the pool gives
-  // the rest (an insertion's cone has more cells than its zone, so it rarely
-  // gets any back). Nothing here allocates: the caller reserved the cells and
-  // the edge map.
+  // incarnation), rather than through the pool's free list; the pool makes
+  // the rest (a cone nearly always has more cells than its zone, so the pool
+  // seldom takes a zone id back). Nothing here allocates: the caller
+  // reserved the cells and the edge map.
   std::vector<CellId>& zone = ctx.conflict_zone;
   const std::size_t facets = ctx.boundary.size();
-  const bool retiring = some_at_last_incarnation.load(std::memory_order_relaxed);
   std::size_t kept = 0;  // zone[0, kept): the ids the cone takes over
   for (const CellId c : zone) {
     if (!cell_infinite(c)) --ctx.d_finite_cells;
     note_destroyed(ctx, c);
-    if (kept < facets && !(retiring && incarnation(c) == last_incarnation))
+    if (kept < facets && !retires(c))
       zone[kept++] = c;
     else
-      free_cell(ctx, c);  // retires an id at its last incarnation
+      free_cell(ctx, c);  // a retired id, or one the cone has no cell for
   }
   for (std::size_t k = 0; k < facets; ++k) {
     OpContext::BoundaryFacet& bf = ctx.boundary[k];

@@ -233,8 +233,7 @@ void Triangulation::Impl::free_all_cells(OpContext& ctx) {
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
   cells[c].v[0] = no_vertex;
   --ctx.d_cells;
-  // Retired: a next incarnation would wrap (the flag spares the tag's load).
-  if (some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) == last_incarnation) return;
+  if (retires(c)) return;
   give_id<cell_segment>(ctx.free_cells, c, spare_cells, cell_next(), cell_link());
 }
 

@@ -170,6 +170,11 @@ struct Triangulation::Impl {
     tags[c].store((t & ~mark_bits) | m, std::memory_order_relaxed);
   }
   std::uint32_t incarnation(CellId c) const { return tags[c].load(std::memory_order_relaxed) >> 2; }
+  // c's id is retired when c dies (never reused): a next incarnation would
+  // wrap. The flag spares the tag's load while no id is that old.
+  bool retires(CellId c) const {
+    return some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) == last_incarnation;
+  }
   // A new incarnation of c, unmarked (c is being (re)made; its writer holds it).
   void renew(CellId c) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);

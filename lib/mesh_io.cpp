@@ -9,6 +9,7 @@
 // doubles.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstring>
 #include <string>
 #include <type_traits>
@@ -32,8 +33,18 @@ TetgenFiles tetgen_files(const std::string& path) {
 
 namespace {
 
-void check_indices(const Mesh& mesh, const char* who) {
+// What the writers refuse before writing anything: a tetrahedron naming a
+// point that is not there, or a point that is not finite (the readers, pdt's
+// and TetGen's, refuse it).
+void refuse_unwritable(const Mesh& mesh, const char* who) {
   const std::size_t n = mesh.points.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Point3& p = mesh.points[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+      throw Error(ErrorCode::invalid_argument, std::string(who) + ": point " + std::to_string(i) + " (" +
+                                                   std::to_string(p.x) + ", " + std::to_string(p.y) + ", " +
+                                                   std::to_string(p.z) + ") is not finite; nothing was written");
+  }
   for (std::size_t t = 0; t < mesh.tets.size(); ++t)
     for (std::uint32_t v : mesh.tets[t])
       if (v >= n)
@@ -129,7 +140,7 @@ void write_tetgen_files(const std::string& path, std::size_t points, EachPoint e
 }  // namespace
 
 void write_tetgen(const std::string& path, const Mesh& mesh) {
-  check_indices(mesh, "write_tetgen");
+  refuse_unwritable(mesh, "write_tetgen");
   write_tetgen_files(
       path, mesh.points.size(),
       [&](auto emit) {
@@ -198,7 +209,7 @@ void put_ascii(detail::OutputFile& out, const T* v, std::size_t n, std::size_t p
 }  // namespace
 
 void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, std::span<const CellField> cell_fields) {
-  check_indices(mesh, "write_vtu");
+  refuse_unwritable(mesh, "write_vtu");
   for (const CellField& f : cell_fields)
     if (f.values.size() != mesh.tets.size())
       throw Error(ErrorCode::invalid_argument, "write_vtu: cell field '" + f.name + "' has " +

@@ -226,14 +226,19 @@ OpReader::~OpReader() = default;
 OpReader::OpReader(OpReader&&) noexcept = default;
 OpReader& OpReader::operator=(OpReader&&) noexcept = default;
 
-const std::optional<Box>& OpReader::box() const { return state_->box; }
-std::optional<std::uint64_t> OpReader::announced_count() const { return state_->count; }
-std::uint64_t OpReader::operations_read() const { return state_->read; }
-std::uint64_t OpReader::bytes_read() const { return state_->f.offset(); }
-const std::string& OpReader::path() const { return state_->f.path(); }
+OpReader::State& OpReader::state_of(const std::unique_ptr<State>& s) {
+  if (!s) throw Error(ErrorCode::invalid_argument, "OpReader: used after it was moved from");
+  return *s;
+}
+
+const std::optional<Box>& OpReader::box() const { return state_of(state_).box; }
+std::optional<std::uint64_t> OpReader::announced_count() const { return state_of(state_).count; }
+std::uint64_t OpReader::operations_read() const { return state_of(state_).read; }
+std::uint64_t OpReader::bytes_read() const { return state_of(state_).f.offset(); }
+const std::string& OpReader::path() const { return state_of(state_).f.path(); }
 
 bool OpReader::next(Operation& op) {
-  State& st = *state_;
+  State& st = state_of(state_);
   if (st.done) return false;
   bool got = false;
   if (st.pending) {

@@ -413,6 +413,32 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
   auto e2 = catch_error([&] { pdt::write_tetgen(d.file("bad"), m); });
   REQUIRE(e2);
   CHECK(e2->code() == pdt::ErrorCode::invalid_argument);
+  CHECK(!std::filesystem::exists(d.file("bad.node")));
+}
+
+TEST_CASE("the mesh writers refuse points that are not finite and write nothing", "[io]") {
+  TempDir d;
+  pdt::Mesh m;
+  m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  m.tets = {{0, 1, 2, 3}};
+  for (double bad : {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                     -std::numeric_limits<double>::infinity()}) {
+    pdt::Mesh b = m;
+    b.points[2].z = bad;
+    auto e = catch_error([&] { pdt::write_tetgen(d.file("nan"), b); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("write_tetgen: point 2") != std::string::npos);
+    CHECK(std::string(e->what()).find("not finite") != std::string::npos);
+    e = catch_error([&] { pdt::write_vtu(d.file("nan.vtu"), b); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("write_vtu: point 2") != std::string::npos);
+    CHECK(d.entries() == 0);
+  }
+  // The same mesh with finite points is written and reads back.
+  pdt::write_tetgen(d.file("ok"), m);
+  CHECK(pdt::read_tetgen(d.file("ok")).points.size() == 4);
 }
 
 TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {

@@ -13,6 +13,7 @@
 #include <csignal>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <random>
 #include <set>
@@ -474,6 +475,30 @@ TEST_CASE("OpWriter not closed leaves no file and an older one as it was; binary
   auto moved = catch_error([&] { a.insert({0, 0, 0}); });  // NOLINT: use after move, on purpose
   REQUIRE(moved);
   CHECK(std::string(moved->what()).find("moved from") != std::string::npos);
+  // A moved-from reader refuses every call the same way; the new owner reads on.
+  {
+    pdt::OpReader r(d.file("m.ops"));
+    pdt::Operation op;
+    REQUIRE(r.next(op));
+    pdt::OpReader r2 = std::move(r);
+    const std::vector<std::function<void()>> calls = {  // NOLINT below: use after move, on purpose
+        [&] { r.next(op); },              // NOLINT
+        [&] { (void)r.box(); },           // NOLINT
+        [&] { (void)r.announced_count(); },  // NOLINT
+        [&] { (void)r.operations_read(); },  // NOLINT
+        [&] { (void)r.bytes_read(); },    // NOLINT
+        [&] { (void)r.path(); }};         // NOLINT
+    for (const auto& call : calls) {
+      auto e = catch_error(call);
+      REQUIRE(e);
+      CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+      CHECK(std::string(e->what()).find("OpReader: used after it was moved from") != std::string::npos);
+    }
+    CHECK(r2.operations_read() == 1);
+    REQUIRE(r2.next(op));
+    CHECK(op.kind == pdt::Operation::Kind::remove);
+    CHECK(!r2.next(op));
+  }
 
   // A FIFO: text is written in place; binary, whose count is patched at
   // close(), is refused before anything is opened (with no reader, opening

@@ -41,8 +41,10 @@ struct CellField {
 // TetGen: path.node + path.ele (path given with or without extension),
 // 0-based numbering. VTK: .vtu UnstructuredGrid ParaView opens, with
 // optional cell fields (invalid_argument if one's size differs from the
-// tetrahedra's). Writes go through a temporary file and a rename; failure
-// throws io_failure.
+// tetrahedra's). A tetrahedron naming a point that is not there, or a point
+// with a NaN or infinite coordinate, is refused (invalid_argument) before
+// anything is written. Writes go through a temporary file and a rename;
+// failure throws io_failure.
 void write_tetgen(const std::string& path, const Mesh& mesh);
 // The same straight from a triangulation, a line at a time, without copying
 // the mesh first (for large meshes). Nodes numbered in vertex-id order.

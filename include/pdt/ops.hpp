@@ -40,7 +40,8 @@ struct OpStream {
 // that a long stream can be replayed without holding it in memory (what it
 // keeps grows with the live insertions, not with the stream). The format is
 // chosen by content; throws as read_ops does, from the constructor (a bad
-// header or box) or from next().
+// header or box) or from next(). A moved-from reader refuses every call
+// (Error invalid_argument).
 class OpReader {
  public:
   explicit OpReader(const std::string& path);
@@ -59,7 +60,7 @@ class OpReader {
 
  private:
   struct State;
-  static State& state_of(const std::unique_ptr<State>& s);  // refuses a moved-from writer
+  static State& state_of(const std::unique_ptr<State>& s);  // refuses a moved-from reader
   std::unique_ptr<State> state_;
 };
 

@@ -298,6 +298,41 @@ void FdWriter::flush() {
 
 // ---- OutputFile -------------------------------------------------------------
 
+namespace {
+
+// The temporaries unlink_temporaries() removes: a slot is free (0), being
+// filled (1) or holds a path (2). Only the OutputFile that filled a slot
+// empties it, after its temporary is renamed or unlinked.
+struct TempSlot {
+  std::atomic<int> state{0};
+  char path[4096];
+};
+TempSlot temp_slots[16];
+
+int track_temporary(const std::string& temp) noexcept {
+  if (temp.size() >= sizeof temp_slots[0].path) return -1;
+  for (int i = 0; i < 16; ++i) {
+    int expected = 0;
+    if (temp_slots[i].state.compare_exchange_strong(expected, 1, std::memory_order_acquire)) {
+      std::memcpy(temp_slots[i].path, temp.c_str(), temp.size() + 1);
+      temp_slots[i].state.store(2, std::memory_order_release);
+      return i;
+    }
+  }
+  return -1;  // not tracked: an interrupted run may leave this one
+}
+
+void untrack_temporary(int slot) noexcept {
+  if (slot >= 0) temp_slots[slot].state.store(0, std::memory_order_release);
+}
+
+}  // namespace
+
+void unlink_temporaries() noexcept {
+  for (TempSlot& s : temp_slots)
+    if (s.state.load(std::memory_order_acquire) == 2) ::unlink(s.path);
+}
+
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   // /dev/stdout, /dev/fd/N and /proc/self/fd/N name a descriptor another
   // process opened: a rename would swap the file from under it, so they are
@@ -340,7 +375,13 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
     if (errno != EEXIST) throw_io_error("cannot create", path, errno);
   }
   if (fd_ < 0) throw_io_error("cannot create", path, EEXIST);
-  writer_ = new FdWriter(fd_, path);
+  temp_slot_ = track_temporary(temp_);
+  try {
+    writer_ = new FdWriter(fd_, path);
+  } catch (...) {
+    discard();
+    throw;
+  }
 }
 
 OutputFile::~OutputFile() {
@@ -353,6 +394,8 @@ void OutputFile::discard() noexcept {
   fd_ = -1;
   if (!temp_.empty()) ::unlink(temp_.c_str());
   temp_.clear();
+  untrack_temporary(temp_slot_);
+  temp_slot_ = -1;
 }
 
 void OutputFile::finish() {
@@ -408,6 +451,8 @@ void OutputFile::commit() {
     throw_io_error("cannot rename the temporary file onto", path_, err);
   }
   temp_.clear();
+  untrack_temporary(temp_slot_);
+  temp_slot_ = -1;
   committed_ = true;
 }
 

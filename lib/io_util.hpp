@@ -145,9 +145,16 @@ class OutputFile {
   int fd_ = -1;
   FdWriter* writer_ = nullptr;
   bool finished_ = false, committed_ = false;
+  int temp_slot_ = -1;  // temp_'s slot for unlink_temporaries, or -1
 };
 
 [[noreturn]] void throw_io_error(const std::string& what, const std::string& path, int err);
+
+// Unlinks the temporary files of the OutputFiles alive now (up to 16 at a
+// time are tracked). Async-signal-safe: the pdt tool calls it from its
+// SIGINT / SIGTERM / SIGHUP handler, so that an interrupted run leaves no
+// partial file behind (a library never installs signal handlers itself).
+void unlink_temporaries() noexcept;
 
 // Lowercase file name suffix tests.
 bool ends_with_nocase(std::string_view s, std::string_view suffix);

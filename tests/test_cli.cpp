@@ -97,6 +97,17 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
         {"run a.ply.gz", "a.ply.gz: gzipped .ply files are not read"},
         {"refine --domain sphere --size 0.5 --trace t.opsb.gz", "--trace t.opsb.gz: pdt writes streams uncompressed"},
         {"check", "check needs a mesh file"},
+        {"check x.vtu", "x.vtu: check reads a TetGen mesh (MESH.node beside MESH.ele)"},
+        {"refine --domain --size 0.5", "option --domain needs a value, not the option '--size'"},
+        {"refine --domain sphere --size 0.5 --budget 18446744073709551616",
+         "--budget '18446744073709551616': too large (at most 18446744073709551615)"},
+        {"refine --domain sphere --size 0.5 --trace tr.xyz",
+         "--trace tr.xyz: pdt run reads a file of that extension as a point set"},
+        {"gen --points 10 --out g.node", "--out g.node: pdt run reads a file of that extension as a point set"},
+        {"refine --domain sphere --size 0.5 --out same.vtu --trace same.vtu",
+         "--trace same.vtu and --out same.vtu both write same.vtu"},
+        {"refine --domain sphere --size 0.5 --out m.node --trace m.ele", "--trace m.ele and --out m.node both write m.ele"},
+        {"run m.node --out m.node", "--out m.node would overwrite the input m.node"},
     };
     for (const auto& [args, why] : cases) {
       INFO(args);
@@ -122,6 +133,39 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     const Result r = run_pdt(d, "refine --domain sphere --size 0.5 --trace ''");
     CHECK(r.code == 2);
     CHECK(r.err.find("--trace needs a file name") != std::string::npos);
+    // An output that is a directory (of TetGen's two files, either) is
+    // refused before the run too, not after it.
+    std::filesystem::create_directory(d.file("dir.vtu"));
+    std::filesystem::create_directory(d.file("t.ele"));
+    for (const auto& [args, dir] :
+         {std::pair{"run '" + ops + "' --out '" + d.file("dir.vtu") + "'", d.file("dir.vtu")},
+          std::pair{"refine --domain sphere --size 0.5 --out '" + d.file("dir.vtu") + "'", d.file("dir.vtu")},
+          std::pair{"refine --domain sphere --size 0.5 --out '" + d.file("t.node") + "'", d.file("t.ele")}}) {
+      INFO(args);
+      const Result rd = run_pdt(d, args);
+      CHECK(rd.code == 2);
+      CHECK(rd.err.find("--out: cannot write '" + dir + "': it is a directory") != std::string::npos);
+      CHECK(rd.out.empty());  // nothing ran
+      CHECK_FALSE(std::filesystem::exists(d.file("t.node")));
+    }
+  }
+  SECTION("an interrupted run leaves no partial output") {
+#ifdef PDT_TOOL_PATH
+    // Ctrl-C during a refinement that writes a trace: the trace's temporary
+    // goes, and neither output exists (an older one would stay as it was).
+    const std::string cmd = std::string("timeout -s INT 1 '") + PDT_TOOL_PATH +
+                            "' refine --domain torus --size 0.006 --threads 2 --trace '" + d.file("k.ops") +
+                            "' --out '" + d.file("k.vtu") + "' >/dev/null 2>&1";
+    const int status = std::system(cmd.c_str());
+    CHECK(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 124);  // timeout's status: it sent the signal
+    for (const auto& e : std::filesystem::directory_iterator(d.path())) {
+      INFO(e.path());
+      CHECK(e.path().filename().string().find(".tmp.") == std::string::npos);
+    }
+    CHECK_FALSE(std::filesystem::exists(d.file("k.ops")));
+    CHECK_FALSE(std::filesystem::exists(d.file("k.vtu")));
+#endif
   }
   SECTION("a stream without a box, piped to the engine") {
     // The engine needs the domain first; without a box line the stream is

@@ -145,7 +145,7 @@ TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds
 }
 
 TEST_CASE("refine: the pruned surface sampling gives exactly the brute-force scan's samples", "[refine]") {
-  // Without a Lipschitz or outside bound surface_samples visits every cell:
+  // Without a Lipschitz or outside bound, or `uncrossed`, surface_samples visits every cell:
   // the pruned scan must give the same points in the same order.
   for (const char* name : {"sphere", "torus", "gyroid"})
     for (double size : {0.3, 0.11})
@@ -155,6 +155,7 @@ TEST_CASE("refine: the pruned surface sampling gives exactly the brute-force sca
         pdt_refine::Domain brute = d;
         brute.lipschitz = 0;
         brute.outside_bound = nullptr;
+        brute.uncrossed = nullptr;
         const std::vector<Point3> pruned = pdt_refine::surface_samples(d, size, seed);
         const std::vector<Point3> all = pdt_refine::surface_samples(brute, size, seed);
         REQUIRE(pruned.size() > 10);
@@ -215,13 +216,16 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   // The surface samples (512 on the torus at 0.2) go in before the end: a
   // budget below them and the corners stops it before anything is inserted,
   // saying why.
-  for (const char* budget : {"12", "5"}) {
+  for (const char* budget : {"500", "300", "100", "12", "5"}) {
     const Result small = run_pdt(d, std::string("refine --domain torus --size 0.2 --threads 2 --budget ") + budget);
     INFO("stdout:\n" << small.out);
     CHECK(small.code == 1);
-    // (Below 512 / 64 the sampling stops early, and says "more".)
-    CHECK(small.out.find("the surface alone needs " + std::string(std::stoul(budget) >= 8 ? "512" : "more") +
+    // Far below 512 a coarser look (at 0.8: 4 times the spacing) already
+    // estimates over twice the budget and says "more"; close to it, the
+    // sampling runs through and gives the count.
+    CHECK(small.out.find("the surface alone needs " + std::string(std::stoul(budget) >= 300 ? "512" : "more") +
                          " sample points, over the point budget of " + budget) != std::string::npos);
+    CHECK(small.out.find("insertions") == std::string::npos);  // refused before anything was inserted
   }
   // Samples that fit, but not with the starting lattice (17 points): hit at the end.
   const Result samples = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 528");

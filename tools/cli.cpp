@@ -5,6 +5,9 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cmath>
+#include <filesystem>
+#include <limits>
 #include <cstdio>
 #include <cstring>
 
@@ -31,11 +34,36 @@ void require_writable_dir(const char* option, const std::string& path) {
                                                      "': " + std::strerror(err));
 }
 
+void require_writable_file(const char* option, const std::string& path) {
+  require_writable_dir(option, path);
+  struct stat st;
+  if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
+    throw pdt::Error(pdt::ErrorCode::io_failure,
+                     std::string(option) + ": cannot write '" + path + "': it is a directory");
+}
+
+bool is_point_file(const std::string& p) {
+  for (const char* ext : {".xyz", ".xyz.gz", ".ply", ".off", ".node", ".smesh"})
+    if (pdt::support::ends_with_nocase(p, ext)) return true;
+  return false;
+}
+
 void require_stream_output_name(const char* usage, const char* option, const std::string& path) {
   if (pdt::support::ends_with_nocase(path, ".gz"))
     usage_error(usage, std::string(option) + " " + path +
                            ": pdt writes streams uncompressed (it reads them gzipped); name it FILE.ops or FILE.opsb "
                            "and gzip it afterwards");
+  if (is_point_file(path))
+    usage_error(usage, std::string(option) + " " + path +
+                           ": pdt run reads a file of that extension as a point set, not as an operation stream; "
+                           "name it FILE.ops (text) or FILE.opsb (binary)");
+  require_writable_file(option, path);
+}
+
+bool same_file(const std::string& a, const std::string& b) {
+  std::error_code ea, eb;
+  const std::filesystem::path pa = std::filesystem::weakly_canonical(a, ea), pb = std::filesystem::weakly_canonical(b, eb);
+  return ea || eb ? a == b : pa == pb;
 }
 
 bool Args::option(const char* name, bool takes_value) {
@@ -46,6 +74,10 @@ bool Args::option(const char* name, bool takes_value) {
     ++i_;
     if (takes_value) {
       if (done()) usage_error(usage_, std::string("option ") + name + " needs a value");
+      // "--domain --size 0.2": the value was forgotten, not "--size".
+      if (a_[i_].compare(0, 2, "--") == 0)
+        usage_error(usage_, std::string("option ") + name + " needs a value, not the option '" + a_[i_] +
+                                "' (a value that starts with -- goes as " + name + "=VALUE)");
       value_ = a_[i_++];
     }
     return true;
@@ -60,6 +92,10 @@ bool Args::option(const char* name, bool takes_value) {
 std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v) {
   unsigned long long n = 0;
   if (pdt::support::parse_count(v, n)) return n;
+  double d = 0;
+  if (pdt::support::parse_real(v, d) && d >= 0 && d == std::floor(d))
+    usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " +
+                                  std::to_string(std::numeric_limits<unsigned long long>::max()) + ")");
   usage_error(args.usage(), std::string(name) + " '" + v + "': expected a non-negative integer");
 }
 

@@ -47,9 +47,18 @@ double parse_real_option(const Args& args, const char* name, const std::string& 
 // not writable (pdt::Error io_failure naming the option and the path); the
 // write itself may still fail later (a full disk), and says so then.
 void require_writable_dir(const char* option, const std::string& path);
+// require_writable_dir, and the path itself is not a directory.
+void require_writable_file(const char* option, const std::string& path);
 // An operation stream's output name: refused (usage) if it ends in .gz, since
-// pdt writes streams uncompressed (and reads them gzipped).
+// pdt writes streams uncompressed (and reads them gzipped), or in an
+// extension pdt run reads as a point file (is_point_file), since it could not
+// be replayed; then require_writable_file.
 void require_stream_output_name(const char* usage, const char* option, const std::string& path);
+// The point-file extensions pdt run reads as a point set (.xyz, .xyz.gz, .ply,
+// .off, .node, .smesh); anything else is an operation stream.
+bool is_point_file(const std::string& path);
+// a and b name the same file (resolved as far as they exist; else compared as given).
+bool same_file(const std::string& a, const std::string& b);
 
 std::string box_string(const pdt::Box& b);
 // One "key   value" line of a command's summary.

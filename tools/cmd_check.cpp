@@ -6,6 +6,7 @@
 
 #include "cli.hpp"
 #include "pdt/pdt.hpp"
+#include "support/cli_text.hpp"
 
 namespace pdt_cli {
 
@@ -29,6 +30,10 @@ int cmd_check(Args args) {
     input = args.next();
   }
   if (!input) usage_error(check_usage, "check needs a mesh file (MESH.node)");
+  for (const char* ext : {".vtu", ".ops", ".opsb", ".xyz", ".ply", ".off", ".smesh", ".gz"})
+    if (pdt::support::ends_with_nocase(*input, ext))
+      usage_error(check_usage, *input + ": check reads a TetGen mesh (MESH.node beside MESH.ele); write one with "
+                                        "pdt run or pdt refine --out MESH.node");
   const pdt::Mesh m = pdt::read_tetgen(*input);
   const pdt::MeshCheck c = pdt::check_mesh(m);
   std::printf("%s: %s%s\n", input->c_str(), c.valid ? "" : "INVALID: ", c.message.c_str());

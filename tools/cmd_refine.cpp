@@ -125,9 +125,25 @@ int cmd_refine(Args args) {
                                   ": expected at least 2 (below Shewchuk's bound Delaunay refinement need not terminate)");
   if (out && !ends_with_nocase(*out, ".vtu") && !ends_with_nocase(*out, ".node") && !ends_with_nocase(*out, ".ele"))
     usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
-  if (out) require_writable_dir("--out", *out);  // before the run, so a typo cannot waste it
+  // Before the run, so a typo cannot waste it: every file it will write.
+  std::vector<std::string> out_files;
+  if (out) {
+    if (ends_with_nocase(*out, ".vtu")) {
+      out_files = {*out};
+    } else {
+      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
+      out_files = {files.node, files.ele};
+    }
+    for (const std::string& f : out_files) require_writable_file("--out", f);
+  }
   if (trace && trace->empty()) usage_error(refine_usage, "--trace needs a file name");
-  if (trace) require_stream_output_name(refine_usage, "--trace", *trace);
+  if (trace) {
+    require_stream_output_name(refine_usage, "--trace", *trace);
+    for (const std::string& f : out_files)
+      if (same_file(f, *trace))
+        usage_error(refine_usage, "--trace " + *trace + " and --out " + *out + " both write " + f +
+                                      "; give the trace a name of its own");
+  }
   pdt_refine::RefineOptions o;
   try {
     o.domain = pdt_refine::domain_by_name(*domain_name);

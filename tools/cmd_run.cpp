@@ -330,12 +330,6 @@ ReplayStats insert_points(const std::vector<pdt::Point3>& pts, unsigned workers,
   return st;
 }
 
-bool is_point_file(const std::string& p) {
-  for (const char* ext : {".xyz", ".xyz.gz", ".ply", ".off", ".node", ".smesh"})
-    if (ends_with_nocase(p, ext)) return true;
-  return false;
-}
-
 void print_engine_stats(const ReplayStats& st) {
   const pdt::WorkerStats w = st.engine_stats.total();
   char buf[512];
@@ -411,7 +405,16 @@ int cmd_run(Args args) {
     if (ends_with_nocase(*out, ".node") || ends_with_nocase(*out, ".ele")) out_kind = OutKind::tetgen;
     else if (ends_with_nocase(*out, ".vtu")) out_kind = OutKind::vtu;
     else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
-    require_writable_dir("--out", *out);
+    if (out_kind == OutKind::tetgen) {
+      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
+      require_writable_file("--out", files.node);
+      require_writable_file("--out", files.ele);
+      if (same_file(files.node, *input) || same_file(files.ele, *input))
+        usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
+    } else {
+      require_writable_file("--out", *out);
+      if (same_file(*out, *input)) usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
+    }
   }
   if (vtu_ascii && out_kind != OutKind::vtu)
     usage_error(run_usage, "--vtu-ascii applies to a .vtu output; give --out FILE.vtu (or drop --vtu-ascii)");

@@ -9,6 +9,8 @@
 // "pdt: ..." line on stderr; nothing escapes as an uncaught exception.
 #include <cerrno>
 #include <csignal>
+#include <sys/resource.h>
+
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -19,9 +21,22 @@
 #include "cli.hpp"
 #include "pdt/error.hpp"
 
+namespace pdt::detail {
+void unlink_temporaries() noexcept;  // lib/io_util.hpp: libpdt's outputs not yet renamed into place
+}
+
 namespace {
 
 using namespace pdt_cli;
+
+// Interrupted (Ctrl-C, kill, a closed terminal): the files being written go
+// (each is a temporary until it is complete), then the signal does what it
+// would have done.
+extern "C" void on_interrupt(int sig) {
+  pdt::detail::unlink_temporaries();
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
 
 const char* const main_usage =
     "usage: pdt <command> [options]\n"
@@ -70,6 +85,8 @@ int main(int argc, char** argv) {
   // A closed pipe on stdout (pdt run ... | head) is then a write error that
   // ends the run with one "pdt: ..." line and status 2, not a silent SIGPIPE.
   std::signal(SIGPIPE, SIG_IGN);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP})
+    if (std::signal(sig, on_interrupt) == SIG_IGN) std::signal(sig, SIG_IGN);  // ignored by the parent: stays so
   try {
     const int status = dispatch(argc, argv);
     // A summary lost to a full disk or a closed pipe is a failure too.
@@ -83,7 +100,18 @@ int main(int argc, char** argv) {
   } catch (const pdt::Error& e) {
     std::fprintf(stderr, "pdt: %s\n", e.what());
   } catch (const std::bad_alloc&) {
-    std::fprintf(stderr, "pdt: out of memory\n");
+    // pdt reserves address space for its arrays up front (tens of GiB, not
+    // backed until used): a limit on it fails that first, with plenty of
+    // memory free.
+    struct rlimit as;
+    if (::getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY)
+      std::fprintf(stderr,
+                   "pdt: out of memory, or of address space: the address-space limit (ulimit -v) is %llu MiB, and "
+                   "pdt reserves address space for its arrays up front (up to some 100 GiB, backed only as used); "
+                   "raise or remove the limit (ulimit -v unlimited)\n",
+                   static_cast<unsigned long long>(as.rlim_cur >> 20));
+    else
+      std::fprintf(stderr, "pdt: out of memory\n");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "pdt: internal error: %s\n", e.what());
   } catch (...) {

@@ -41,6 +41,21 @@ double gyroid(const Point3& p) {
   return std::max(slab, gyroid_cube(p));
 }
 
+// The gyroid's f has one sign on the ball (c, reach) when the cube's or the
+// raw level function's bounds say so: |g| changes by at most
+// |grad g| <= 2 sqrt(3) pi per unit (each partial derivative is pi times a
+// sum of two products of sines and cosines), the cube's term by at most 1,
+// and f < 0 exactly where |g| < 0.6 and the cube's term < 0 (its division by
+// the gradient's length keeps the sign). A 1e-9 margin covers rounding.
+bool gyroid_uncrossed(const Point3& c, double reach) {
+  const double k = M_PI, lip = 2 * std::sqrt(3.0) * k, margin = 1e-9;
+  const double x = k * c.x, y = k * c.y, z = k * c.z;
+  const double g = std::fabs(std::sin(x) * std::cos(y) + std::sin(y) * std::cos(z) + std::sin(z) * std::cos(x));
+  const double cube = gyroid_cube(c);
+  if (cube > reach + margin || g - 0.6 > lip * reach + margin) return true;  // outside on the whole ball
+  return cube < -reach - margin && 0.6 - g > lip * reach + margin;            // inside on the whole ball
+}
+
 Point3 gradient(double (*f)(const Point3&), const Point3& p, double h) {
   return {(f({p.x + h, p.y, p.z}) - f({p.x - h, p.y, p.z})) / (2 * h),
           (f({p.x, p.y + h, p.z}) - f({p.x, p.y - h, p.z})) / (2 * h),
@@ -56,7 +71,7 @@ Domain domain_by_name(const std::string& name) {
   // normalised level function has no simple bound.
   if (name == "sphere") return {"sphere", {{-1.5, -1.5, -1.5}, {1.5, 1.5, 1.5}}, sphere, 1, 1};
   if (name == "torus") return {"torus", {{-1.9, -1.9, -0.9}, {1.9, 1.9, 0.9}}, torus, 1, 1};
-  if (name == "gyroid") return {"gyroid", {{-1.5, -1.5, -1.5}, {1.5, 1.5, 1.5}}, gyroid, 1, 0, gyroid_cube};
+  if (name == "gyroid") return {"gyroid", {{-1.5, -1.5, -1.5}, {1.5, 1.5, 1.5}}, gyroid, 1, 0, gyroid_cube, gyroid_uncrossed};
   throw pdt::Error(pdt::ErrorCode::invalid_argument,
                    "unknown domain '" + name + "'; expected one of: " + domain_names());
 }
@@ -103,7 +118,7 @@ std::vector<Point3> surface_samples(const Domain& d, double spacing, std::uint64
     for (std::int64_t j0 = 0; j0 < ny; j0 += B)
       for (std::int64_t i0 = 0; i0 < nx; i0 += B) {
         const std::int64_t i1 = std::min(nx, i0 + B), j1 = std::min(ny, j0 + B), k1 = std::min(nz, k0 + B);
-        if (d.lipschitz > 0 || d.outside_bound) {
+        if (d.lipschitz > 0 || d.outside_bound || d.uncrossed) {
           const Point3 lo = at(i0, j0, k0), hi = at(i1, j1, k1);
           const Point3 c{(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
           const double reach =
@@ -112,6 +127,7 @@ std::vector<Point3> surface_samples(const Domain& d, double spacing, std::uint64
               1e-12;
           if (d.lipschitz > 0 && std::fabs(d.f(c)) > d.lipschitz * reach) continue;
           if (d.outside_bound && d.outside_bound(c) > reach) continue;  // f > 0 on the whole block
+          if (d.uncrossed && d.uncrossed(c, reach)) continue;           // one sign on the whole block
         }
         for (std::int64_t k = k0; k < k1; ++k)
           for (std::int64_t j = j0; j < j1; ++j)

@@ -28,6 +28,11 @@ struct Domain {
   // Optional: a function <= f with Lipschitz constant 1 (the gyroid's cube),
   // so that blocks far outside are skipped even without a bound on f.
   double (*outside_bound)(const pdt::Point3&) = nullptr;
+  // Optional: true only if f has one sign (< 0, or >= 0) on the whole ball
+  // of radius reach around c, for a domain whose f has no Lipschitz bound
+  // (the gyroid's, divided by its gradient), so that blocks inside or
+  // outside it are skipped all the same.
+  bool (*uncrossed)(const pdt::Point3& c, double reach) = nullptr;
 };
 
 // The domain called name; throws pdt::Error(invalid_argument) listing the
@@ -39,8 +44,9 @@ const char* domain_names();  // "sphere, torus, gyroid"
 // spacing / 2 to each other: a grid of cells of that size, each cell the
 // surface crosses projected onto the surface (Newton steps on f), then thinned
 // in an order drawn from the seed (the seed picks which ones stay). With a
-// Lipschitz bound (or an outside bound), blocks of cells the surface cannot reach are skipped whole
-// (same result), so the time follows the surface's cells, not the box's.
+// Lipschitz bound (or an outside bound, or `uncrossed`), blocks of cells the
+// surface cannot reach are skipped whole (same result), so the time follows
+// the surface's cells, not the box's.
 // More than max_candidates crossed cells: stops there and sets *too_many
 // (the samples are then not the surface's; a caller with a point budget
 // passes a cap above which the samples alone would exceed it).

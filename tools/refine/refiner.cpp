@@ -411,11 +411,32 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
   Trace trace(o.trace, o.domain.box);
   // The surface samples, unless they alone exceed the budget: each kept
   // sample stands for a few crossed cells (those whose projected centres
-  // fall within spacing / 2 of it: about 1.5, never near 64), so past 64 per
-  // budgeted point the sampling stops, and with it the run.
+  // fall within spacing / 2 of it: about 1.5, never near 8), so past 8 per
+  // budgeted point the sampling stops, and with it the run. (64 per point
+  // let a surface of 4.8M samples run a minute and take 1 GB before its
+  // refusal under a budget of 100k.)
   bool too_many = false;
-  const std::size_t cap = o.budget >= SIZE_MAX / 64 - 1 ? SIZE_MAX : static_cast<std::size_t>(64 * (o.budget + 1));
-  std::vector<Point3> samples = surface_samples(o.domain, o.size, o.seed, cap, &too_many);
+  constexpr std::size_t per_point = 8;
+  const std::size_t cap =
+      o.budget >= SIZE_MAX / per_point - 1 ? SIZE_MAX : static_cast<std::size_t>(per_point * (o.budget + 1));
+  // First coarser looks, from extent / 16 down by factors of 4 to 4 times
+  // the spacing: a surface's samples grow as 1 / spacing^2, so one whose
+  // samples at spacing s, times (s / size)^2, exceed twice the budget is
+  // refused without sampling it finely (which took minutes and gigabytes for
+  // a gyroid of 10^8 samples). Each look costs about 1/16 of the next; the
+  // factor 2 leaves room for the estimate's error, and a coarse look that
+  // misses thin features only underestimates.
+  if (cap != SIZE_MAX) {
+    double s = o.size * 4;
+    while (s * 4 <= extent / 16) s *= 4;
+    for (; s >= o.size * 4 && !too_many; s /= 4) {
+      const std::vector<Point3> coarse = surface_samples(o.domain, s, o.seed, cap, &too_many);
+      const double estimate = static_cast<double>(coarse.size()) * (s / o.size) * (s / o.size);
+      if (estimate > 2.0 * (static_cast<double>(o.budget) + 1)) too_many = true;
+    }
+  }
+  std::vector<Point3> samples;
+  if (!too_many) samples = surface_samples(o.domain, o.size, o.seed, cap, &too_many);
   if (!too_many && samples.empty()) {
     char why[256];
     std::snprintf(why, sizeof why,

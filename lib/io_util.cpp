@@ -301,8 +301,10 @@ void FdWriter::flush() {
 namespace {
 
 // The temporaries unlink_temporaries() removes: a slot is free (0), being
-// filled (1) or holds a path (2). Only the OutputFile that filled a slot
-// empties it, after its temporary is renamed or unlinked.
+// filled (1), holds a path (2), or is being read by unlink_temporaries (3,
+// then it stays: the process is going). Only the OutputFile that filled a
+// slot empties it (2 -> 0), after its temporary is renamed or unlinked, so a
+// slot is never refilled while it is read.
 struct TempSlot {
   std::atomic<int> state{0};
   char path[4096];
@@ -323,14 +325,18 @@ int track_temporary(const std::string& temp) noexcept {
 }
 
 void untrack_temporary(int slot) noexcept {
-  if (slot >= 0) temp_slots[slot].state.store(0, std::memory_order_release);
+  if (slot < 0) return;
+  int expected = 2;
+  temp_slots[slot].state.compare_exchange_strong(expected, 0, std::memory_order_release);
 }
 
 }  // namespace
 
 void unlink_temporaries() noexcept {
-  for (TempSlot& s : temp_slots)
-    if (s.state.load(std::memory_order_acquire) == 2) ::unlink(s.path);
+  for (TempSlot& s : temp_slots) {
+    int expected = 2;
+    if (s.state.compare_exchange_strong(expected, 3, std::memory_order_acquire)) ::unlink(s.path);
+  }
 }
 
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {

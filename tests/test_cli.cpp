@@ -108,6 +108,7 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
          "--trace same.vtu and --out same.vtu both write same.vtu"},
         {"refine --domain sphere --size 0.5 --out m.node --trace m.ele", "--trace m.ele and --out m.node both write m.ele"},
         {"run m.node --out m.node", "--out m.node would overwrite the input m.node"},
+        {"gen --points 1e17 --out x.ops", "--points '1e17': with a decimal point or an exponent at most 2^53"},
     };
     for (const auto& [args, why] : cases) {
       INFO(args);
@@ -148,6 +149,16 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
       CHECK(rd.out.empty());  // nothing ran
       CHECK_FALSE(std::filesystem::exists(d.file("t.node")));
     }
+  }
+  SECTION("a stream goes to /dev/stdout in place (no temporary in /dev, which only root may write)") {
+#ifdef PDT_TOOL_PATH
+    // Through a pipe (a file would be written at offset 0 twice: by the
+    // stream, then by the summary's line on the shell's descriptor).
+    const std::string cmd = std::string("'") + PDT_TOOL_PATH + "' gen --points 3 --out /dev/stdout | grep -c '^i ' >'" +
+                            d.file("count.txt") + "'";
+    CHECK(std::system(cmd.c_str()) == 0);
+    CHECK(pdt_test::read_file(d.file("count.txt")) == "3\n");
+#endif
   }
   SECTION("an interrupted run leaves no partial output") {
 #ifdef PDT_TOOL_PATH

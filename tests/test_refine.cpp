@@ -232,6 +232,11 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   INFO("stdout:\n" << samples.out);
   CHECK(samples.code == 1);
   CHECK(samples.out.find("the point budget of 528 was hit") != std::string::npos);
+  // A size beyond any coarser look (4 times it overflows to infinity):
+  // refused as too large, at once.
+  const Result huge = run_pdt(d, "refine --domain sphere --size 1e308 --threads 1");
+  CHECK(huge.code == 2);
+  CHECK(huge.err.find("too large for the sphere domain") != std::string::npos);
   // A size whose surface needs millions of samples, under a small budget:
   // the sampling stops early (it took minutes and gigabytes before).
   const Result tiny = run_pdt(d, "refine --domain gyroid --size 1e-3 --threads 2 --budget 100");

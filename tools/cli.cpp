@@ -35,11 +35,16 @@ void require_writable_dir(const char* option, const std::string& path) {
 }
 
 void require_writable_file(const char* option, const std::string& path) {
-  require_writable_dir(option, path);
   struct stat st;
-  if (::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode))
-    throw pdt::Error(pdt::ErrorCode::io_failure,
-                     std::string(option) + ": cannot write '" + path + "': it is a directory");
+  if (::stat(path.c_str(), &st) == 0) {
+    if (S_ISDIR(st.st_mode))
+      throw pdt::Error(pdt::ErrorCode::io_failure,
+                       std::string(option) + ": cannot write '" + path + "': it is a directory");
+    if (!S_ISREG(st.st_mode)) return;  // a device or FIFO: written in place, nothing made in its directory
+  }
+  // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too (OutputFile).
+  if (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) return;
+  require_writable_dir(option, path);
 }
 
 bool is_point_file(const std::string& p) {
@@ -93,9 +98,14 @@ std::uint64_t parse_count_option(const Args& args, const char* name, const std::
   unsigned long long n = 0;
   if (pdt::support::parse_count(v, n)) return n;
   double d = 0;
-  if (pdt::support::parse_real(v, d) && d >= 0 && d == std::floor(d))
-    usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " +
-                                  std::to_string(std::numeric_limits<unsigned long long>::max()) + ")");
+  if (pdt::support::parse_real(v, d) && d >= 0 && d == std::floor(d)) {
+    if (d >= 0x1p64)
+      usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " +
+                                    std::to_string(std::numeric_limits<unsigned long long>::max()) + ")");
+    usage_error(args.usage(), std::string(name) + " '" + v +
+                                  "': with a decimal point or an exponent at most 2^53 (9007199254740992); "
+                                  "write larger counts in digits");
+  }
   usage_error(args.usage(), std::string(name) + " '" + v + "': expected a non-negative integer");
 }
 

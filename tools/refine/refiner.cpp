@@ -426,7 +426,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
   // a gyroid of 10^8 samples). Each look costs about 1/16 of the next; the
   // factor 2 leaves room for the estimate's error, and a coarse look that
   // misses thin features only underestimates.
-  if (cap != SIZE_MAX) {
+  if (cap != SIZE_MAX && o.size * 4 <= extent) {  // (a coarser look than the domain sees nothing)
     double s = o.size * 4;
     while (s * 4 <= extent / 16) s *= 4;
     for (; s >= o.size * 4 && !too_many; s /= 4) {

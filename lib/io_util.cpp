@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <iterator>
 #include <string_view>
 
 namespace pdt::detail {
@@ -313,7 +314,7 @@ TempSlot temp_slots[16];
 
 int track_temporary(const std::string& temp) noexcept {
   if (temp.size() >= sizeof temp_slots[0].path) return -1;
-  for (int i = 0; i < 16; ++i) {
+  for (int i = 0; i < static_cast<int>(std::size(temp_slots)); ++i) {
     int expected = 0;
     if (temp_slots[i].state.compare_exchange_strong(expected, 1, std::memory_order_acquire)) {
       std::memcpy(temp_slots[i].path, temp.c_str(), temp.size() + 1);

@@ -6,12 +6,13 @@
 
 #include <cerrno>
 #include <cmath>
-#include <filesystem>
-#include <limits>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
+#include <limits>
 
 #include "pdt/error.hpp"
+#include "pdt/io.hpp"
 #include "support/cli_text.hpp"
 #include "support/sys_info.hpp"
 
@@ -45,6 +46,12 @@ void require_writable_file(const char* option, const std::string& path) {
   // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too (OutputFile).
   if (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) return;
   require_writable_dir(option, path);
+}
+
+std::vector<std::string> mesh_output_files(const std::string& out) {
+  if (pdt::support::ends_with_nocase(out, ".vtu")) return {out};
+  const pdt::TetgenFiles files = pdt::tetgen_files(out);
+  return {files.node, files.ele};
 }
 
 bool is_point_file(const std::string& p) {

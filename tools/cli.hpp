@@ -47,8 +47,12 @@ double parse_real_option(const Args& args, const char* name, const std::string& 
 // not writable (pdt::Error io_failure naming the option and the path); the
 // write itself may still fail later (a full disk), and says so then.
 void require_writable_dir(const char* option, const std::string& path);
-// require_writable_dir, and the path itself is not a directory.
+// The path is not a directory, and require_writable_dir unless it is written
+// in place (an existing device or FIFO, or a name under /dev or /proc).
 void require_writable_file(const char* option, const std::string& path);
+// The files a mesh output writes: FILE.vtu itself, or TetGen's .node and .ele
+// pair for a name ending in .node or .ele (pdt::tetgen_files).
+std::vector<std::string> mesh_output_files(const std::string& out);
 // An operation stream's output name: refused (usage) if it ends in .gz, since
 // pdt writes streams uncompressed (and reads them gzipped), or in an
 // extension pdt run reads as a point file (is_point_file), since it could not

@@ -126,16 +126,8 @@ int cmd_refine(Args args) {
   if (out && !ends_with_nocase(*out, ".vtu") && !ends_with_nocase(*out, ".node") && !ends_with_nocase(*out, ".ele"))
     usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
   // Before the run, so a typo cannot waste it: every file it will write.
-  std::vector<std::string> out_files;
-  if (out) {
-    if (ends_with_nocase(*out, ".vtu")) {
-      out_files = {*out};
-    } else {
-      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
-      out_files = {files.node, files.ele};
-    }
-    for (const std::string& f : out_files) require_writable_file("--out", f);
-  }
+  const std::vector<std::string> out_files = out ? mesh_output_files(*out) : std::vector<std::string>{};
+  for (const std::string& f : out_files) require_writable_file("--out", f);
   if (trace && trace->empty()) usage_error(refine_usage, "--trace needs a file name");
   if (trace) {
     require_stream_output_name(refine_usage, "--trace", *trace);

@@ -405,15 +405,9 @@ int cmd_run(Args args) {
     if (ends_with_nocase(*out, ".node") || ends_with_nocase(*out, ".ele")) out_kind = OutKind::tetgen;
     else if (ends_with_nocase(*out, ".vtu")) out_kind = OutKind::vtu;
     else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
-    if (out_kind == OutKind::tetgen) {
-      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
-      require_writable_file("--out", files.node);
-      require_writable_file("--out", files.ele);
-      if (same_file(files.node, *input) || same_file(files.ele, *input))
-        usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
-    } else {
-      require_writable_file("--out", *out);
-      if (same_file(*out, *input)) usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
+    for (const std::string& f : mesh_output_files(*out)) {
+      require_writable_file("--out", f);
+      if (same_file(f, *input)) usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
     }
   }
   if (vtu_ascii && out_kind != OutKind::vtu)

@@ -7,10 +7,10 @@
 // `run --validate` found a broken triangulation, `refine` missed its bounds);
 // 2 usage error or any failure (bad input, I/O). Every failure is one
 // "pdt: ..." line on stderr; nothing escapes as an uncaught exception.
-#include <cerrno>
-#include <csignal>
 #include <sys/resource.h>
 
+#include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <exception>

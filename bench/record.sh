@@ -10,6 +10,9 @@
 #          build/bench_peers --points 1000000 --threads 1,2 --repeat 3 \
 #          --csv bench/results/peers-1M-2cores-intel.csv
 # The bench's exit status is the script's; the file holds what it printed either way.
+# Where the checkout has no git (a copy run on another machine), PDT_RECORD_COMMIT names
+# the commit the binaries were built from; PDT_RECORD_NOTE adds a remark to the header
+# (e.g. where the binaries and their libraries came from).
 set -uo pipefail
 if [ $# -lt 2 ]; then
   echo "usage: $0 OUT.txt BENCH [ARGS...]" >&2
@@ -29,8 +32,12 @@ if [ -f "$build_dir/CMakeCache.txt" ]; then
   allocator=$(sed -n 's/^PDT_ALLOCATOR:[A-Z]*=//p' "$build_dir/CMakeCache.txt")
   build_type=$(sed -n 's/^CMAKE_BUILD_TYPE:[A-Z]*=//p' "$build_dir/CMakeCache.txt")
 fi
-commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
-git diff --quiet HEAD 2>/dev/null || commit="$commit (with uncommitted changes)"
+if [ -n "${PDT_RECORD_COMMIT:-}" ]; then
+  commit=$PDT_RECORD_COMMIT
+else
+  commit=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
+  git diff --quiet HEAD 2>/dev/null || commit="$commit (with uncommitted changes)"
+fi
 model=$(lscpu | sed -n 's/^Model name:[[:space:]]*//p')
 model_number=$(lscpu | sed -n 's/^Model:[[:space:]]*//p')
 hypervisor=$(lscpu | sed -n 's/^Hypervisor vendor:[[:space:]]*//p')
@@ -47,6 +54,7 @@ mkdir -p "$(dirname "$out")"
 {
   echo "# command: $*"
   echo "# ${build_type:-Release} (${allocator:-pool} allocator build), commit $commit, $(date +%F); $machine"
+  [ -n "${PDT_RECORD_NOTE:-}" ] && echo "# $PDT_RECORD_NOTE"
   echo "# load average at start: $(cut -d' ' -f1-3 /proc/loadavg | sed 's/ /, /g')"
 } > "$out"
 "$@" >> "$out" 2>&1

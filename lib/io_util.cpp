@@ -340,7 +340,45 @@ void unlink_temporaries() noexcept {
   }
 }
 
+namespace {
+
+// The descriptor of this process that a path names (/dev/stdout, /dev/stderr,
+// /dev/fd/N, /proc/self/fd/N) when it is open; -1 for any other path.
+int own_descriptor(const std::string& path) {
+  int fd = -1;
+  if (path == "/dev/stdout") fd = 1;
+  else if (path == "/dev/stderr") fd = 2;
+  else {
+    std::string_view digits;
+    for (std::string_view prefix : {"/dev/fd/", "/proc/self/fd/"})
+      if (path.rfind(prefix, 0) == 0) digits = std::string_view(path).substr(prefix.size());
+    if (digits.empty()) return -1;
+    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), fd);
+    if (ec != std::errc{} || end != digits.data() + digits.size()) return -1;
+  }
+  return ::fcntl(fd, F_GETFD) == -1 ? -1 : fd;
+}
+
+}  // namespace
+
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
+  // A descriptor this process holds (pdt gen --out /dev/stdout > file): its
+  // copy writes where the descriptor stands, as the shell set it up (> has
+  // truncated, >> appends). Opening the name again would start a second
+  // file offset at 0 and truncate, so the stream and whatever else goes to
+  // that descriptor would overwrite each other.
+  if (const int own = own_descriptor(path); own >= 0) {
+    fd_ = ::fcntl(own, F_DUPFD_CLOEXEC, 0);
+    if (fd_ < 0) throw_io_error("cannot open", path, errno);
+    direct_ = true;
+    try {
+      writer_ = new FdWriter(fd_, path);
+    } catch (...) {
+      ::close(fd_);
+      throw;
+    }
+    return;
+  }
   // /dev/stdout, /dev/fd/N and /proc/self/fd/N name a descriptor another
   // process opened: a rename would swap the file from under it, so they are
   // written in place.

@@ -116,7 +116,10 @@ class FdWriter {
 // points to (the link stays); a device, FIFO or socket (/dev/null, a pipe), or
 // a descriptor by name (/dev/stdout, /dev/fd/N, /proc/...), is written in
 // place, since no rename could stand in for it, and so is the file behind a
-// dangling link. Those direct writes cannot be undone.
+// dangling link. Those direct writes cannot be undone. A descriptor of this
+// process by name (/dev/stdout, /dev/fd/1) is written through a copy of it,
+// from where it stands: after what the process wrote there before, without
+// truncating it (the shell's > did, or >> appends).
 class OutputFile {
  public:
   explicit OutputFile(const std::string& path);

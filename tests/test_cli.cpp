@@ -6,6 +6,7 @@
 #include <catch2/catch.hpp>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <utility>
 
@@ -152,12 +153,48 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
   }
   SECTION("a stream goes to /dev/stdout in place (no temporary in /dev, which only root may write)") {
 #ifdef PDT_TOOL_PATH
-    // Through a pipe (a file would be written at offset 0 twice: by the
-    // stream, then by the summary's line on the shell's descriptor).
-    const std::string cmd = std::string("'") + PDT_TOOL_PATH + "' gen --points 3 --out /dev/stdout | grep -c '^i ' >'" +
-                            d.file("count.txt") + "'";
-    CHECK(std::system(cmd.c_str()) == 0);
+    const std::string tool = std::string("'") + PDT_TOOL_PATH + "' ";
+    // Through a pipe: the stream alone goes down it, the summary to stderr.
+    const std::string piped = tool + "gen --points 3 --out /dev/stdout 2>'" + d.file("piped_err.txt") +
+                              "' | grep -c '^i ' >'" + d.file("count.txt") + "'";
+    CHECK(std::system(piped.c_str()) == 0);
     CHECK(pdt_test::read_file(d.file("count.txt")) == "3\n");
+    CHECK(pdt_test::read_file(d.file("piped_err.txt")).find("wrote /dev/stdout: 3 insertions") == 0);
+    // Into a file (> then >>): the stream is written where the shell's
+    // descriptor stands, so the file is the stream, then two streams, and the
+    // summary is not written over it. Both replay.
+    const std::string file = d.file("to_file.ops");
+    const std::string once = tool + "gen --points 3 --out /dev/stdout >'" + file + "' 2>/dev/null";
+    const std::string again = tool + "gen --points 4 --seed 2 --out /dev/fd/1 >>'" + file + "' 2>/dev/null";
+    CHECK(std::system(once.c_str()) == 0);
+    const pdt::OpStream first = pdt::read_ops(file);
+    CHECK(first.insert_count() == 3);
+    CHECK(pdt_test::read_file(file).find("wrote") == std::string::npos);
+    CHECK(std::system(again.c_str()) == 0);
+    const std::string both = pdt_test::read_file(file);
+    CHECK(both.find("# pdt operation stream: 3 insertions") == 0);
+    CHECK(both.find("# pdt operation stream: 4 insertions") != std::string::npos);
+    // A summary line on stdout and a stream elsewhere: the summary stays on stdout.
+    const Result r = run_pdt(d, "gen --points 3 --out '" + d.file("elsewhere.ops") + "'");
+    CHECK(r.code == 0);
+    CHECK(r.out.find("wrote ") == 0);
+    CHECK(r.err.empty());
+#endif
+  }
+  SECTION("an output and the input that are one file under two names") {
+#ifdef PDT_TOOL_PATH
+    // A hard link: same_file compares the files, not the names.
+    const std::string input = d.file("in.xyz"), link = d.file("link.node");
+    {
+      std::ofstream f(input);
+      f << "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n";
+    }
+    std::filesystem::create_hard_link(input, link);
+    const Result r = run_pdt(d, "run '" + input + "' --out '" + link + "'");
+    INFO(r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("would overwrite the input") != std::string::npos);
+    CHECK(pdt_test::read_file(input) == "0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n");
 #endif
   }
   SECTION("an interrupted run leaves no partial output") {

@@ -18,6 +18,12 @@
 
 namespace pdt_cli {
 
+namespace {
+// Standard output, or standard error once an output of the command was found
+// to be written to standard output (require_stream_output_name).
+std::FILE* summary_file = stdout;
+}  // namespace
+
 void usage_error(const char* usage, std::string msg) { throw UsageError{std::move(msg), usage}; }
 
 bool is_help(const std::string& a) { return a == "--help" || a == "-h"; }
@@ -70,9 +76,16 @@ void require_stream_output_name(const char* usage, const char* option, const std
                            ": pdt run reads a file of that extension as a point set, not as an operation stream; "
                            "name it FILE.ops (text) or FILE.opsb (binary)");
   require_writable_file(option, path);
+  // pdt gen --out /dev/stdout > FILE: the stream goes to standard output, the
+  // summary to standard error, so that FILE holds the stream alone.
+  if (writes_standard_output(path)) summary_file = stderr;
 }
 
 bool same_file(const std::string& a, const std::string& b) {
+  // Both exist: the same file whatever the names (a hard link, /dev/fd/N).
+  struct stat sa, sb;
+  if (::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0)
+    return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
   std::error_code ea, eb;
   const std::filesystem::path pa = std::filesystem::weakly_canonical(a, ea), pb = std::filesystem::weakly_canonical(b, eb);
   return ea || eb ? a == b : pa == pb;
@@ -137,7 +150,17 @@ std::string box_string(const pdt::Box& b) {
   return s;
 }
 
-void row(const char* key, const std::string& value) { std::printf("%-16s %s\n", key, value.c_str()); }
+std::FILE* summary_stream() { return summary_file; }
+
+bool writes_standard_output(const std::string& path) {
+  struct stat out, st;
+  if (::fstat(STDOUT_FILENO, &out) != 0 || ::stat(path.c_str(), &st) != 0) return false;
+  if (out.st_dev != st.st_dev || out.st_ino != st.st_ino) return false;
+  // Both /dev/null (or another device that is not a terminal): nothing to mix up.
+  return !S_ISCHR(out.st_mode) || ::isatty(STDOUT_FILENO) == 1;
+}
+
+void row(const char* key, const std::string& value) { std::fprintf(summary_file, "%-16s %s\n", key, value.c_str()); }
 
 std::string per_second(std::uint64_t n, double s) {
   if (n == 0 || s <= 0) return "";

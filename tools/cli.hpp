@@ -3,6 +3,7 @@
 // The pdt tool's command-line plumbing, shared by its commands: options of
 // the form "--name value" or "--name=value", usage errors (exit 2 with the
 // command's usage), number options, and the summary's rows.
+#include <cstdio>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -56,16 +57,25 @@ std::vector<std::string> mesh_output_files(const std::string& out);
 // An operation stream's output name: refused (usage) if it ends in .gz, since
 // pdt writes streams uncompressed (and reads them gzipped), or in an
 // extension pdt run reads as a point file (is_point_file), since it could not
-// be replayed; then require_writable_file.
+// be replayed; then require_writable_file. When the path is this process's
+// standard output (writes_standard_output), the command's summary goes to
+// standard error from then on.
 void require_stream_output_name(const char* usage, const char* option, const std::string& path);
 // The point-file extensions pdt run reads as a point set (.xyz, .xyz.gz, .ply,
 // .off, .node, .smesh); anything else is an operation stream.
 bool is_point_file(const std::string& path);
-// a and b name the same file (resolved as far as they exist; else compared as given).
+// a and b name the same file: the same device and inode when both exist, else
+// the same path resolved as far as it exists (else compared as given).
 bool same_file(const std::string& a, const std::string& b);
 
 std::string box_string(const pdt::Box& b);
-// One "key   value" line of a command's summary.
+// path is the file this process's standard output writes (/dev/stdout, or the
+// file stdout is redirected to), other than /dev/null-like devices.
+bool writes_standard_output(const std::string& path);
+// Where a command's summary goes: standard output, or standard error when an
+// output stream of the command goes to standard output.
+std::FILE* summary_stream();
+// One "key   value" line of a command's summary (on summary_stream()).
 void row(const char* key, const std::string& value);
 // " (12,345/s)", or "" when there is nothing to say.
 std::string per_second(std::uint64_t n, double s);

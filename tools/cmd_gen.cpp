@@ -67,7 +67,7 @@ int cmd_gen(Args args) {
   pdt::support::Stopwatch sw;
   const pdt::OpStream s = pdt::generate(o);
   pdt::write_ops(*out, s);
-  std::printf("wrote %s: %s insertions, %s removals (%s, seed %llu), box %s, in %s\n", out->c_str(),
+  std::fprintf(summary_stream(), "wrote %s: %s insertions, %s removals (%s, seed %llu), box %s, in %s\n", out->c_str(),
               format_count(s.insert_count()).c_str(), format_count(s.remove_count()).c_str(), pdt::to_string(o.dist),
               static_cast<unsigned long long>(o.seed), box_string(*s.box).c_str(), format_seconds(sw.seconds()).c_str());
   return 0;

@@ -165,7 +165,7 @@ int cmd_refine(Args args) {
     row("bounds", "unfinished: at this size the surface alone needs " +
                       (st.surface_samples ? format_count(st.surface_samples) : std::string("more")) +
                       " sample points, over the point budget of " + format_count(o.budget) + " (raise --budget or --size)");
-    std::fflush(stdout);
+    std::fflush(summary_stream());
     return 1;
   }
   const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed);
@@ -228,7 +228,7 @@ int cmd_refine(Args args) {
     }
   }
   if (trace) row("trace", *trace + " (pdt run " + *trace + " --threads N replays it)");
-  std::fflush(stdout);
+  std::fflush(summary_stream());
   return status;
 }
 

@@ -492,7 +492,7 @@ int cmd_run(Args args) {
     }
     row("wrote", written + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
   }
-  std::fflush(stdout);
+  std::fflush(summary_stream());
   return status;
 }
 

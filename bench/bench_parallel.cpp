@@ -51,6 +51,8 @@
 // Order: the main tables, then --interleaved, then --extreme. A configuration
 // running past --timeout (an engine livelock) prints HANG and exits 3; what
 // was printed and written to the CSV before stays.
+#include <sys/resource.h>
+
 #include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/task_arena.h>
 #include <oneapi/tbb/version.h>
@@ -158,7 +160,38 @@ struct Phase {
   std::uint64_t steals = 0;   // blocks served away from their home worker
   std::uint64_t recuts = 0;   // times the engine re-cut its blocks to where the work is
   double imbalance = 1;       // max / mean operations completed per worker in this phase
+  // The configuration's process over the phase, every thread (getrusage):
+  // CPU seconds in user and system mode, and minor page faults (first touches
+  // of fresh pages, mostly). user + sys against seconds * threads tells busy
+  // workers from idle or descheduled ones; sys, the kernel's part.
+  double cpu_user = 0, cpu_sys = 0;
+  std::uint64_t minor_faults = 0;
 };
+
+// What getrusage says of this process now (see Phase::cpu_user).
+struct CpuUse {
+  double user = 0, sys = 0;
+  std::uint64_t minor_faults = 0;
+};
+CpuUse cpu_use_now() {
+  rusage u{};
+  ::getrusage(RUSAGE_SELF, &u);
+  auto sec = [](const timeval& t) { return double(t.tv_sec) + 1e-6 * double(t.tv_usec); };
+  return {sec(u.ru_utime), sec(u.ru_stime), static_cast<std::uint64_t>(u.ru_minflt)};
+}
+void set_cpu_use(Phase& p, const CpuUse& a, const CpuUse& b) {
+  p.cpu_user = b.user - a.user;
+  p.cpu_sys = b.sys - a.sys;
+  p.minor_faults = b.minor_faults - a.minor_faults;
+}
+// (user + sys) / (seconds * threads) in %: 100 when every thread ran all along.
+std::string fmt_busy(const Phase& p, unsigned threads) {
+  return p.seconds > 0 && threads ? fmt("%.0f", 100 * (p.cpu_user + p.cpu_sys) / (p.seconds * threads)) : "-";
+}
+// sys / (user + sys) in %.
+std::string fmt_sys(const Phase& p) {
+  return p.cpu_user + p.cpu_sys > 0 ? fmt("%.1f", 100 * p.cpu_sys / (p.cpu_user + p.cpu_sys)) : "-";
+}
 
 // Counts the operations that fail (OpResult::error): the only callback the
 // timed loops pass. It fits std::function's small buffer (no allocation) and
@@ -316,6 +349,7 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
                      [&](pdt::Triangulation& t, pdt::Engine& e, ErrorSink& errors, Result& r) {
     std::vector<pdt::Engine::Ticket> tickets(n_remove);
     const pdt::EngineStats s0 = e.stats();
+    const CpuUse c0 = cpu_use_now();
     Stopwatch sw;
     if (batch) {
       const pdt::Engine::Ticket first = e.insert_batch(pts, errors.callback());
@@ -328,12 +362,15 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
     }
     e.drain();
     const double t_ins = sw.seconds();
+    const CpuUse c1 = cpu_use_now();
     const pdt::EngineStats s1 = e.stats();
     r.ins = phase_between(s0, s1, t_ins, pts.size());
+    set_cpu_use(r.ins, c0, c1);
     r.ins.errors = errors.count.load();
     r.shape.cells_after_insert = t.number_of_finite_cells();
     r.bytes_per_tet = t.number_of_cells() ? double(t.memory_bytes()) / double(t.number_of_cells()) : 0;
 
+    const CpuUse c2 = cpu_use_now();
     sw.restart();
     if (batch)
       e.remove_insertions(tickets, errors.callback());
@@ -341,7 +378,9 @@ Result run_pdt(const std::vector<pdt::Point3>& pts, const pdt::Box& box, std::si
       for (std::size_t k = 0; k < n_remove; ++k) e.remove_insertion(tickets[k], errors.callback());
     e.drain();
     const double t_rem = sw.seconds();
+    const CpuUse c3 = cpu_use_now();
     r.rem = phase_between(s1, e.stats(), t_rem, n_remove);
+    set_cpu_use(r.rem, c2, c3);
     r.rem.errors = errors.count.load() - r.ins.errors;
   });
 }
@@ -352,6 +391,7 @@ Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, Balance balance 
                      *s.box, threads,
                      [&](pdt::Triangulation&, pdt::Engine& e, ErrorSink& errors, Result& r) {
     const pdt::EngineStats s0 = e.stats();
+    const CpuUse c0 = cpu_use_now();
     Stopwatch sw;
     for (const pdt::Operation& op : s.ops) {
       if (op.kind == pdt::Operation::Kind::insert)
@@ -360,7 +400,10 @@ Result run_pdt_stream(const pdt::OpStream& s, unsigned threads, Balance balance 
         e.remove_insertion(op.target, errors.callback());  // tickets number the insertions from 0, as the stream does
     }
     e.drain();
-    r.mixed = phase_between(s0, e.stats(), sw.seconds(), s.ops.size());
+    const double seconds = sw.seconds();
+    const CpuUse c1 = cpu_use_now();
+    r.mixed = phase_between(s0, e.stats(), seconds, s.ops.size());
+    set_cpu_use(r.mixed, c0, c1);
     r.mixed.errors = errors.count.load();
   }, balance);
 }
@@ -392,7 +435,8 @@ struct Csv {
     on = true;
     f << "experiment,dist,points,impl,phase,threads,blocks_per_axis,ops,seconds,speedup1,speedup2,"
          "cgal_par_over_pdt,max_rollbacks_per_completed_pct,rollbacks,sleeps,seconds_asleep,deferred,"
-         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance,recuts\n";
+         "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance,recuts,"
+         "cpu_user_seconds,cpu_sys_seconds,minor_faults\n";
   }
   // base1: pdt's 1-thread time of the phase; cgal: CGAL seq time; par: CGAL par time at this T (0: none).
   void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
@@ -427,6 +471,9 @@ struct Csv {
       f << r.bytes_per_tet;
     f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << ",";
     if (is_pdt) f << p.steals << "," << p.imbalance << "," << p.recuts;
+    f << ",";
+    if (is_pdt) f << p.cpu_user << "," << p.cpu_sys << "," << p.minor_faults;
+    else f << ",,";
     f << "\n";
     f.flush();
   }
@@ -512,6 +559,10 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Rollbacks (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).rollbacks); });
   row("Sleeps (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).sleeps); });
   row("Seconds asleep (total)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(mine[i], ph).seconds_asleep); });
+  row("CPU busy: user+sys / (time*T) (%)", [&](int ph, std::size_t i) { return fmt_busy(ph_of(mine[i], ph), mine[i].threads); });
+  row("System share of CPU (%)", [&](int ph, std::size_t i) { return fmt_sys(ph_of(mine[i], ph)); });
+  row("Minor page faults (thousands)",
+      [&](int ph, std::size_t i) { return fmt("%.0f", double(ph_of(mine[i], ph).minor_faults) / 1e3); });
   row("Global operations", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).global_ops); });
   row("Workers with work", [&](int ph, std::size_t i) {
     return fmt_u(ph_of(mine[i], ph).busy_workers) + "/" + fmt_u(mine[i].threads);
@@ -712,6 +763,8 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Rollbacks (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.rollbacks); });
   row("Deferred removals (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.deferred); });
   row("Sleeps (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.sleeps); });
+  row("CPU busy: user+sys / (time*T) (%)", [&](std::size_t i) { return fmt_busy(mine[i].mixed, mine[i].threads); });
+  row("System share of CPU (%)", [&](std::size_t i) { return fmt_sys(mine[i].mixed); });
   row("Global operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.global_ops); });
   row("Failed operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.errors); });
   row("CGAL seq time (s)", [&](std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });
@@ -760,6 +813,9 @@ int skewed_table(const Options& o, const std::string& name, const pdt::OpStream&
     return fmt_u(of(g, i).mixed.busy_workers) + "/" + fmt_u(of(g, i).threads);
   });
   tab.row("Rollbacks (total)", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.rollbacks); });
+  tab.row("CPU busy: user+sys / (time*T) (%)",
+          [&](int g, std::size_t i) { return fmt_busy(of(g, i).mixed, of(g, i).threads); });
+  tab.row("System share of CPU (%)", [&](int g, std::size_t i) { return fmt_sys(of(g, i).mixed); });
   tab.row("Max #Rollbacks/#compl.ops (%)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.max_rb_pct); });
   tab.row("Seconds asleep (total)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds_asleep); });
   tab.row("Global operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.global_ops); });

@@ -9,10 +9,12 @@
 // triangulation.
 #include "point_readers.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "pdt/error.hpp"
@@ -195,9 +197,16 @@ bool ply_binary_instance(InputFile& f, const PlyElement& e, bool big, std::vecto
       if (f.read_bytes(cb, cs) != cs) return false;
       const double count = ply_value(p.count_type, cb, big);
       if (count < 0) f.fail("negative list length in element '" + e.name + "'");
-      const std::size_t bytes = static_cast<std::size_t>(count) * ply_size(p.type);
-      scratch.resize(bytes);
-      if (f.read_bytes(scratch.data(), bytes) != bytes) return false;
+      // Skipped in pieces of at most 64 KiB: a length the file does not
+      // hold (up to 2^32 - 1 items of 8 bytes) costs no more memory than
+      // that before the end of the file says so.
+      std::uint64_t left = static_cast<std::uint64_t>(count) * ply_size(p.type);
+      scratch.resize(std::size_t{1} << 16);
+      while (left > 0) {
+        const std::size_t part = static_cast<std::size_t>(std::min<std::uint64_t>(left, scratch.size()));
+        if (f.read_bytes(scratch.data(), part) != part) return false;
+        left -= part;
+      }
       vals.push_back(0);  // placeholder, keeps indices aligned with props
     } else {
       unsigned char vb[8];
@@ -274,9 +283,11 @@ std::vector<Point3> read_ply(InputFile& f) {
   for (std::size_t i = 0; i < ve.props.size(); ++i) {
     const auto& p = ve.props[i];
     if (p.is_list) continue;
-    if (p.name == "x") ix = static_cast<int>(i);
-    if (p.name == "y") iy = static_cast<int>(i);
-    if (p.name == "z") iz = static_cast<int>(i);
+    for (auto [name, index] : {std::pair{"x", &ix}, std::pair{"y", &iy}, std::pair{"z", &iz}}) {
+      if (p.name != name) continue;
+      if (*index >= 0) f.fail(std::string("the vertex element has two properties named '") + name + "'");
+      *index = static_cast<int>(i);
+    }
   }
   if (ix < 0 || iy < 0 || iz < 0) f.fail("the vertex element has no scalar x, y and z properties");
 
@@ -313,7 +324,10 @@ std::vector<Point3> read_ply(InputFile& f) {
           const auto& p = el.props[pi];
           if (t >= n) f.fail("vertex " + std::to_string(k) + " has too few values for its " + std::to_string(el.props.size()) + " properties");
           if (p.is_list) {
-            std::uint64_t cnt = parse_count(f, tok[t], "list length");
+            const std::uint64_t cnt = parse_count(f, tok[t], "list length");
+            if (cnt > n - t - 1)
+              f.fail("vertex " + std::to_string(k) + ": its list '" + p.name + "' announces " + std::to_string(cnt) +
+                     " values, and the line has " + std::to_string(n - t - 1) + " after it");
             t += 1 + cnt;
             continue;
           }

@@ -263,6 +263,19 @@ TEST_CASE("ply ascii: vertex element after others, list properties skipped", "[i
   expect_bad_points(p, p + ":", "no scalar x, y and z");
   write_file(p, "PLY\n");
   expect_bad_points(p, p + ":1:", "not 'ply'");
+  // A list announcing more values than its line holds (2^64 - 1 of them
+  // wrapped the count round to the next token, read as x).
+  for (const char* count : {"18446744073709551615", "3"}) {
+    INFO(count);
+    write_file(p, std::string("ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar int tag\n"
+                              "property float x\nproperty float y\nproperty float z\nend_header\n") +
+                      count + " 1 2\n");
+    expect_bad_points(p, p + ":9:", "its list 'tag' announces");
+  }
+  // Two properties of one name: which one is x?
+  write_file(p, "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nproperty float y\n"
+                "property float z\nend_header\n1 2 3 4\n");
+  expect_bad_points(p, p + ":", "two properties named 'x'");
 }
 
 TEST_CASE("ply binary little and big endian, mixed types, lists in other elements", "[io]") {
@@ -295,6 +308,16 @@ TEST_CASE("ply binary little and big endian, mixed types, lists in other element
     // Truncated in the vertex data.
     write_file(p, header(big ? "binary_big_endian" : "binary_little_endian") + body.substr(0, body.size() - 20));
     expect_bad_points(p, p + ": 'vertex' element 1", "file ends");
+  }
+  // A list whose length the file does not hold: refused at the end of the
+  // file, without first reserving what the length announces (2^32 - 1
+  // doubles: 34 GB).
+  {
+    const std::string p = d.file("huge_list.ply");
+    write_file(p, "ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list uint double v\n"
+                  "element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n" +
+                      le(std::uint32_t{0xFFFFFFFFu}) + le(1.0));
+    expect_bad_points(p, p + ":", "file ends");
   }
   // A NaN coordinate in binary data.
   const std::string p = d.file("nan.ply");
@@ -436,6 +459,21 @@ TEST_CASE("the mesh writers refuse points that are not finite and write nothing"
     CHECK(std::string(e->what()).find("write_vtu: point 2") != std::string::npos);
     CHECK(d.entries() == 0);
   }
+  // A path that names no file ("", a folder, or TetGen's pair hidden as
+  // ".node" / ".ele"): refused, nothing written.
+  for (const std::string& nameless : {std::string(), d.path().string() + "/", d.file(".node"), d.file(".ELE")}) {
+    INFO("'" << nameless << "'");
+    auto e = catch_error([&] { pdt::write_tetgen(nameless, m); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("names no file") != std::string::npos);
+  }
+  for (const std::string& nameless : {std::string(), d.path().string() + "/"}) {
+    auto e = catch_error([&] { pdt::write_vtu(nameless, m); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  }
+  CHECK(d.entries() == 0);
   // The same mesh with finite points is written and reads back.
   pdt::write_tetgen(d.file("ok"), m);
   CHECK(pdt::read_tetgen(d.file("ok")).points.size() == 4);

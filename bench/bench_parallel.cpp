@@ -153,6 +153,7 @@ struct Phase {
   std::uint64_t rollbacks = 0;  // summed over workers
   std::uint64_t sleeps = 0;
   double seconds_asleep = 0;
+  double seconds_idle = 0;  // summed over workers: suspended with nothing to claim
   std::uint64_t deferred = 0;
   std::uint64_t global_ops = 0;
   unsigned busy_workers = 0;  // workers that completed at least one operation
@@ -187,6 +188,10 @@ void set_cpu_use(Phase& p, const CpuUse& a, const CpuUse& b) {
 // (user + sys) / (seconds * threads) in %: 100 when every thread ran all along.
 std::string fmt_busy(const Phase& p, unsigned threads) {
   return p.seconds > 0 && threads ? fmt("%.0f", 100 * (p.cpu_user + p.cpu_sys) / (p.seconds * threads)) : "-";
+}
+// The workers' idle seconds over seconds * threads, in %.
+std::string fmt_idle(const Phase& p, unsigned threads) {
+  return p.seconds > 0 && threads ? fmt("%.1f", 100 * p.seconds_idle / (p.seconds * threads)) : "-";
 }
 // sys / (user + sys) in %.
 std::string fmt_sys(const Phase& p) {
@@ -236,6 +241,7 @@ Phase phase_between(const pdt::EngineStats& a, const pdt::EngineStats& b, double
     p.rollbacks += rollbacks;
     p.sleeps += w1.sleeps - w0.sleeps;
     p.seconds_asleep += w1.seconds_asleep - w0.seconds_asleep;
+    p.seconds_idle += w1.seconds_idle - w0.seconds_idle;
     p.deferred += w1.deferred - w0.deferred;
   }
   p.global_ops = b.global_operations - a.global_operations;
@@ -436,7 +442,7 @@ struct Csv {
     f << "experiment,dist,points,impl,phase,threads,blocks_per_axis,ops,seconds,speedup1,speedup2,"
          "cgal_par_over_pdt,max_rollbacks_per_completed_pct,rollbacks,sleeps,seconds_asleep,deferred,"
          "global_operations,busy_workers,failed_operations,bytes_per_tet,finite_cells,steals,imbalance,recuts,"
-         "cpu_user_seconds,cpu_sys_seconds,minor_faults\n";
+         "cpu_user_seconds,cpu_sys_seconds,minor_faults,seconds_idle\n";
   }
   // base1: pdt's 1-thread time of the phase; cgal: CGAL seq time; par: CGAL par time at this T (0: none).
   void row(const std::string& experiment, const std::string& dist, std::uint64_t points, const Result& r,
@@ -472,8 +478,8 @@ struct Csv {
     f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << ",";
     if (is_pdt) f << p.steals << "," << p.imbalance << "," << p.recuts;
     f << ",";
-    if (is_pdt) f << p.cpu_user << "," << p.cpu_sys << "," << p.minor_faults;
-    else f << ",,";
+    if (is_pdt) f << p.cpu_user << "," << p.cpu_sys << "," << p.minor_faults << "," << p.seconds_idle;
+    else f << ",,,";
     f << "\n";
     f.flush();
   }
@@ -559,6 +565,7 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Rollbacks (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).rollbacks); });
   row("Sleeps (total)", [&](int ph, std::size_t i) { return fmt_u(ph_of(mine[i], ph).sleeps); });
   row("Seconds asleep (total)", [&](int ph, std::size_t i) { return fmt("%.3f", ph_of(mine[i], ph).seconds_asleep); });
+  row("Workers idle: idle / (time*T) (%)", [&](int ph, std::size_t i) { return fmt_idle(ph_of(mine[i], ph), mine[i].threads); });
   row("CPU busy: user+sys / (time*T) (%)", [&](int ph, std::size_t i) { return fmt_busy(ph_of(mine[i], ph), mine[i].threads); });
   row("System share of CPU (%)", [&](int ph, std::size_t i) { return fmt_sys(ph_of(mine[i], ph)); });
   row("Minor page faults (thousands)",
@@ -763,6 +770,7 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Rollbacks (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.rollbacks); });
   row("Deferred removals (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.deferred); });
   row("Sleeps (total)", [&](std::size_t i) { return fmt_u(mine[i].mixed.sleeps); });
+  row("Workers idle: idle / (time*T) (%)", [&](std::size_t i) { return fmt_idle(mine[i].mixed, mine[i].threads); });
   row("CPU busy: user+sys / (time*T) (%)", [&](std::size_t i) { return fmt_busy(mine[i].mixed, mine[i].threads); });
   row("System share of CPU (%)", [&](std::size_t i) { return fmt_sys(mine[i].mixed); });
   row("Global operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.global_ops); });
@@ -818,6 +826,7 @@ int skewed_table(const Options& o, const std::string& name, const pdt::OpStream&
   tab.row("System share of CPU (%)", [&](int g, std::size_t i) { return fmt_sys(of(g, i).mixed); });
   tab.row("Max #Rollbacks/#compl.ops (%)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.max_rb_pct); });
   tab.row("Seconds asleep (total)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds_asleep); });
+  tab.row("Workers idle: idle / (time*T) (%)", [&](int g, std::size_t i) { return fmt_idle(of(g, i).mixed, of(g, i).threads); });
   tab.row("Global operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.global_ops); });
   tab.row("Failed operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.errors); });
   tab.row("CGAL seq time (s)", [&](int, std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });

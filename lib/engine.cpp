@@ -590,6 +590,9 @@ EngineStats Engine::stats() const {
     ws.steals = w->steals.load();
     ws.escalated = w->escalated.load();
     ws.seconds_asleep = w->seconds_asleep.load();
+    ws.seconds_idle = w->seconds_idle.load();
+    if (const std::int64_t since = w->idle_since_ns.load(); since != 0)  // idle now
+      ws.seconds_idle += 1e-9 * double(std::max<std::int64_t>(0, detail::steady_ns() - since));
     ws.max_rollbacks_per_completed = ws.completed ? static_cast<double>(ws.rollbacks) / ws.completed : 0;
     s.workers.push_back(ws);
   }

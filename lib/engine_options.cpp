@@ -119,6 +119,7 @@ WorkerStats EngineStats::total() const {
     t.steals += w.steals;
     t.escalated += w.escalated;
     t.seconds_asleep += w.seconds_asleep;
+    t.seconds_idle += w.seconds_idle;
     t.max_rollbacks_per_completed = std::max(t.max_rollbacks_per_completed, w.max_rollbacks_per_completed);
   }
   return t;

@@ -122,7 +122,12 @@ WorkerCoroutine EngineState::body(Worker& w) {
     Block* b = claim(w);
     if (!b) {
       if (maybe_recut(w)) continue;
+      w.idle_since_ns.store(steady_ns(), std::memory_order_relaxed);
       co_await IdleAwait{{this, &w}};
+      // Resumed (on whichever thread): the stretch ends now.
+      const std::int64_t since = w.idle_since_ns.exchange(0, std::memory_order_relaxed);
+      w.seconds_idle.store(w.seconds_idle.load(std::memory_order_relaxed) + 1e-9 * double(steady_ns() - since),
+                           std::memory_order_relaxed);
       continue;
     }
     bool sleep = false;

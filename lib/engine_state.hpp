@@ -172,8 +172,21 @@ struct alignas(64) Worker {
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},
       escalated{0};
   std::atomic<double> seconds_asleep{0};
+  // Idle time (IdleAwait): seconds_idle sums the stretches that ended;
+  // idle_since_ns is when the one under way began (steady_ns()), 0 when the
+  // worker is not idle, so that stats() counts it too. Written only by the
+  // worker's own task, before it says idle and after it is resumed.
+  std::atomic<double> seconds_idle{0};
+  std::atomic<std::int64_t> idle_since_ns{0};
   std::atomic<std::uint64_t> finished{0};  // operations whose results were delivered
 };
+
+// steady_clock now, in nanoseconds since its epoch; never 0 (Worker::idle_since_ns).
+inline std::int64_t steady_ns() {
+  const std::int64_t ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  return ns > 0 ? ns : 1;
+}
 
 struct EngineState {
   EngineState(Triangulation& t, const Box& d, EngineOptions o, unsigned workers, unsigned blocks, tbb::task_arena* a);

@@ -433,6 +433,36 @@ TEST_CASE("engine: 16 workers insert 3000 normal points then remove them all", "
   }
 }
 
+TEST_CASE("engine: a worker's idle time is counted, the stretch under way too", "[engine][tsan]") {
+  // After a drain every worker that ran waits for work: the idle seconds grow
+  // while nothing is submitted (stats() counts the stretch under way), by no
+  // more than the workers times the time that passed, and never fall back.
+  pdt::Triangulation t;
+  const std::vector<Point3> pts = random_points(scaled(20000, 4000), 61);
+  tbb::task_arena arena(4);
+  arena.execute([&] {
+    pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(4));
+    ErrorSink errors;
+    for (const auto& p : pts) e.insert(p, errors.callback());
+    e.drain();
+    errors.require_none();
+    const double before = e.stats().total().seconds_idle;
+    const auto t0 = std::chrono::steady_clock::now();
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const double after = e.stats().total().seconds_idle;
+    const double passed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    REQUIRE(before >= 0);
+    REQUIRE(after >= before + 0.04);  // at least one worker idle all along
+    REQUIRE(after <= before + 4 * passed + 0.01);
+    // Work again: the stretches end, and what they held stays counted.
+    for (const auto& p : random_points(2000, 62)) e.insert(p, errors.callback());
+    e.drain();
+    errors.require_none();
+    REQUIRE(e.stats().total().seconds_idle >= after);
+  });
+  require_valid(t);
+}
+
 TEST_CASE("engine: the contention manager suspends a worker that keeps rolling back", "[engine][tsan]") {
   // Deterministic contention: the test itself holds one vertex's lock, so
   // removing that vertex rolls back until it lets go. With u- = u+ = 1 and a

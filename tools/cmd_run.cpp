@@ -334,10 +334,10 @@ void print_engine_stats(const ReplayStats& st) {
   const pdt::WorkerStats w = st.engine_stats.total();
   char buf[512];
   std::snprintf(buf, sizeof buf,
-                "%s completed, %s attempts, %s rollbacks, %s deferred, %s sleeps (%.3f s asleep), %s steals, %s "
-                "escalated",
+                "%s completed, %s attempts, %s rollbacks, %s deferred, %s sleeps (%.3f s asleep), %.3f s idle, %s "
+                "steals, %s escalated",
                 format_count(w.completed).c_str(), format_count(w.attempts).c_str(), format_count(w.rollbacks).c_str(),
-                format_count(w.deferred).c_str(), format_count(w.sleeps).c_str(), w.seconds_asleep,
+                format_count(w.deferred).c_str(), format_count(w.sleeps).c_str(), w.seconds_asleep, w.seconds_idle,
                 format_count(w.steals).c_str(), format_count(w.escalated).c_str());
   row("workers", buf);
   std::snprintf(buf, sizeof buf, "%.4f%% (max over workers); %s operations ran with the world stopped",

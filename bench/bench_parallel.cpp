@@ -477,6 +477,7 @@ struct Csv {
       f << r.bytes_per_tet;
     f << "," << (&p == &r.ins ? r.shape.cells_after_insert : r.shape.finite_cells) << ",";
     if (is_pdt) f << p.steals << "," << p.imbalance << "," << p.recuts;
+    else f << ",,";  // every row as many fields as the header
     f << ",";
     if (is_pdt) f << p.cpu_user << "," << p.cpu_sys << "," << p.minor_faults << "," << p.seconds_idle;
     else f << ",,,";
@@ -773,6 +774,7 @@ int interleaved_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   row("Workers idle: idle / (time*T) (%)", [&](std::size_t i) { return fmt_idle(mine[i].mixed, mine[i].threads); });
   row("CPU busy: user+sys / (time*T) (%)", [&](std::size_t i) { return fmt_busy(mine[i].mixed, mine[i].threads); });
   row("System share of CPU (%)", [&](std::size_t i) { return fmt_sys(mine[i].mixed); });
+  row("Minor page faults (thousands)", [&](std::size_t i) { return fmt("%.0f", double(mine[i].mixed.minor_faults) / 1e3); });
   row("Global operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.global_ops); });
   row("Failed operations", [&](std::size_t i) { return fmt_u(mine[i].mixed.errors); });
   row("CGAL seq time (s)", [&](std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });
@@ -821,12 +823,14 @@ int skewed_table(const Options& o, const std::string& name, const pdt::OpStream&
     return fmt_u(of(g, i).mixed.busy_workers) + "/" + fmt_u(of(g, i).threads);
   });
   tab.row("Rollbacks (total)", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.rollbacks); });
-  tab.row("CPU busy: user+sys / (time*T) (%)",
-          [&](int g, std::size_t i) { return fmt_busy(of(g, i).mixed, of(g, i).threads); });
-  tab.row("System share of CPU (%)", [&](int g, std::size_t i) { return fmt_sys(of(g, i).mixed); });
   tab.row("Max #Rollbacks/#compl.ops (%)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.max_rb_pct); });
   tab.row("Seconds asleep (total)", [&](int g, std::size_t i) { return fmt("%.3f", of(g, i).mixed.seconds_asleep); });
   tab.row("Workers idle: idle / (time*T) (%)", [&](int g, std::size_t i) { return fmt_idle(of(g, i).mixed, of(g, i).threads); });
+  tab.row("CPU busy: user+sys / (time*T) (%)",
+          [&](int g, std::size_t i) { return fmt_busy(of(g, i).mixed, of(g, i).threads); });
+  tab.row("System share of CPU (%)", [&](int g, std::size_t i) { return fmt_sys(of(g, i).mixed); });
+  tab.row("Minor page faults (thousands)",
+          [&](int g, std::size_t i) { return fmt("%.0f", double(of(g, i).mixed.minor_faults) / 1e3); });
   tab.row("Global operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.global_ops); });
   tab.row("Failed operations", [&](int g, std::size_t i) { return fmt_u(of(g, i).mixed.errors); });
   tab.row("CGAL seq time (s)", [&](int, std::size_t i) { return i == 0 ? fmt("%.3f", seq.mixed.seconds) : "-"; });

@@ -43,7 +43,12 @@ step() {  # OUT.txt BENCH ARGS...
 }
 trace=$out/torus.ops
 if [ ! -s "$trace" ]; then
-  "$bin/pdt" refine --domain torus --size 0.022 --threads 2 --trace "$trace" > /dev/null || exit 1
+  # Exit status 1 (a bound missed, unfinished) still writes the trace.
+  "$bin/pdt" refine --domain torus --size 0.022 --threads 2 --trace "$trace" > /dev/null
+  if [ ! -s "$trace" ]; then
+    echo "$0: pdt refine wrote no trace $trace" >&2
+    exit 1
+  fi
 fi
 step "$out/parallel-1M-16cores.txt" "$bin/bench_parallel" --points 1000000 \
   --threads 1,2,4,8,16 --dists uniform,normal,line --timeout 120 --csv "$out/parallel-1M-16cores.csv"

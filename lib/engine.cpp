@@ -79,6 +79,8 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
     w->handle = bodies.back().handle;
   }
   idle_count.store(static_cast<int>(nworkers));
+  const std::int64_t now = detail::steady_ns();
+  for (auto& w : workers) w->begin_idle(now);  // until its body first runs
   // Every point the workers insert lies in the domain: in the filter's box
   // from now on, which they only read (box_filter.hpp, Impl::insert).
   impl.filter.extend(detail::to_kpoint(domain.lo));
@@ -590,9 +592,10 @@ EngineStats Engine::stats() const {
     ws.steals = w->steals.load();
     ws.escalated = w->escalated.load();
     ws.seconds_asleep = w->seconds_asleep.load();
-    ws.seconds_idle = w->seconds_idle.load();
-    if (const std::int64_t since = w->idle_since_ns.load(); since != 0)  // idle now
-      ws.seconds_idle += 1e-9 * double(std::max<std::int64_t>(0, detail::steady_ns() - since));
+    // The start first: a stretch that ends meanwhile is in the sum then.
+    const std::int64_t since = w->idle_since_ns.load(std::memory_order_acquire);
+    ws.seconds_idle = w->seconds_idle.load(std::memory_order_acquire);
+    if (since != 0) ws.seconds_idle += 1e-9 * double(std::max<std::int64_t>(0, detail::steady_ns() - since));
     ws.max_rollbacks_per_completed = ws.completed ? static_cast<double>(ws.rollbacks) / ws.completed : 0;
     s.workers.push_back(ws);
   }

@@ -114,6 +114,7 @@ struct WorldAwait {
 // The worker's body
 // ---------------------------------------------------------------------------
 WorkerCoroutine EngineState::body(Worker& w) {
+  w.end_idle(steady_ns());  // idle since the engine was made (EngineState's constructor)
   for (;;) {
     if (world.stopped()) {
       co_await WorldAwait{this};
@@ -122,12 +123,9 @@ WorkerCoroutine EngineState::body(Worker& w) {
     Block* b = claim(w);
     if (!b) {
       if (maybe_recut(w)) continue;
-      w.idle_since_ns.store(steady_ns(), std::memory_order_relaxed);
+      w.begin_idle(steady_ns());
       co_await IdleAwait{{this, &w}};
-      // Resumed (on whichever thread): the stretch ends now.
-      const std::int64_t since = w.idle_since_ns.exchange(0, std::memory_order_relaxed);
-      w.seconds_idle.store(w.seconds_idle.load(std::memory_order_relaxed) + 1e-9 * double(steady_ns() - since),
-                           std::memory_order_relaxed);
+      w.end_idle(steady_ns());  // resumed (on whichever thread): the stretch ends now
       continue;
     }
     bool sleep = false;

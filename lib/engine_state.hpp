@@ -172,12 +172,24 @@ struct alignas(64) Worker {
   std::atomic<std::uint64_t> completed{0}, attempts{0}, rollbacks{0}, deferred{0}, sleeps{0}, steals{0},
       escalated{0};
   std::atomic<double> seconds_asleep{0};
-  // Idle time (IdleAwait): seconds_idle sums the stretches that ended;
-  // idle_since_ns is when the one under way began (steady_ns()), 0 when the
-  // worker is not idle, so that stats() counts it too. Written only by the
-  // worker's own task, before it says idle and after it is resumed.
+  // Idle time: seconds_idle sums the stretches that ended; idle_since_ns is
+  // when the one under way began (steady_ns()), 0 when the worker is not
+  // idle, so that stats() counts it too. A worker is idle from the engine's
+  // construction until its body first runs, and in IdleAwait. Written only
+  // by the worker's own task (the constructor, before any runs), through
+  // begin_idle / end_idle; stats() reads idle_since_ns first (acquire).
   std::atomic<double> seconds_idle{0};
   std::atomic<std::int64_t> idle_since_ns{0};
+  void begin_idle(std::int64_t now_ns) { idle_since_ns.store(now_ns, std::memory_order_relaxed); }
+  // The sum is stored before the start is cleared (release): a stats()
+  // meanwhile may count the stretch twice for a moment, never drop it.
+  void end_idle(std::int64_t now_ns) {
+    const std::int64_t since = idle_since_ns.load(std::memory_order_relaxed);
+    if (since == 0) return;
+    seconds_idle.store(seconds_idle.load(std::memory_order_relaxed) + 1e-9 * double(now_ns - since),
+                       std::memory_order_release);
+    idle_since_ns.store(0, std::memory_order_release);
+  }
   std::atomic<std::uint64_t> finished{0};  // operations whose results were delivered
 };
 

@@ -352,7 +352,8 @@ int own_descriptor(const std::string& path) {
     std::string_view digits;
     for (std::string_view prefix : {"/dev/fd/", "/proc/self/fd/"})
       if (path.rfind(prefix, 0) == 0) digits = std::string_view(path).substr(prefix.size());
-    if (digits.empty()) return -1;
+    // As the kernel spells them: no sign, no leading zero (/dev/fd/01 is no name).
+    if (digits.empty() || (digits[0] == '0' && digits.size() > 1)) return -1;
     const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), fd);
     if (ec != std::errc{} || end != digits.data() + digits.size()) return -1;
   }
@@ -368,6 +369,11 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   // file offset at 0 and truncate, so the stream and whatever else goes to
   // that descriptor would overwrite each other.
   if (const int own = own_descriptor(path); own >= 0) {
+    // Refused now, before anything is written, as opening the name would be.
+    struct stat st;
+    if (::fstat(own, &st) == 0 && S_ISDIR(st.st_mode)) throw_io_error("cannot write", path, EISDIR);
+    if ((::fcntl(own, F_GETFL) & O_ACCMODE) == O_RDONLY)
+      throw Error(ErrorCode::io_failure, "cannot write '" + path + "': the descriptor is open for reading only");
     fd_ = ::fcntl(own, F_DUPFD_CLOEXEC, 0);
     if (fd_ < 0) throw_io_error("cannot open", path, errno);
     direct_ = true;
@@ -379,9 +385,9 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
     }
     return;
   }
-  // /dev/stdout, /dev/fd/N and /proc/self/fd/N name a descriptor another
-  // process opened: a rename would swap the file from under it, so they are
-  // written in place.
+  // Other names under /proc and /dev/fd (another process's descriptor, or one
+  // this process does not hold open): a rename would swap the file from under
+  // its holder, so they are written in place.
   direct_ = path.rfind("/proc/", 0) == 0 || path.rfind("/dev/fd/", 0) == 0;
   struct stat st;
   if (!direct_ && ::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {

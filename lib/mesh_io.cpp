@@ -33,20 +33,21 @@ TetgenFiles tetgen_files(const std::string& path) {
 
 namespace {
 
+// A path that names no file, refused before anything is written: "" or a
+// folder ("out/"), and for TetGen's pair a name that is its extension alone
+// (".node": the files would be hidden ".node" and ".ele"). A VTK file named
+// ".vtu" is a (hidden) name like any other.
+void refuse_nameless(const std::string& path, const char* who, bool tetgen_pair) {
+  const std::string base = path.substr(path.find_last_of('/') + 1);
+  if (base.empty() || (tetgen_pair && tetgen_files(base).node == ".node"))
+    throw Error(ErrorCode::invalid_argument, std::string(who) + ": '" + path +
+                                                 "' names no file (give it a name such as mesh" +
+                                                 (tetgen_pair ? ".node" : ".vtu") + "); nothing was written");
+}
+
 // What the writers refuse before writing anything: a tetrahedron naming a
 // point that is not there, or a point that is not finite (the readers, pdt's
 // and TetGen's, refuse it).
-// A path that names no file: "" or a folder ("out/"); TetGen's pair would
-// be hidden files ".node" and ".ele" there.
-void refuse_nameless(const std::string& path, const char* who) {
-  const std::string base = path.substr(path.find_last_of('/') + 1);
-  if (base.empty() || (std::strcmp(who, "write_tetgen") == 0 && tetgen_files(base).node == ".node"))
-    throw Error(ErrorCode::invalid_argument, std::string(who) + ": '" + path +
-                                                 "' names no file (give it a name such as mesh" +
-                                                 (std::strcmp(who, "write_tetgen") == 0 ? ".node" : ".vtu") +
-                                                 "); nothing was written");
-}
-
 void refuse_unwritable(const Mesh& mesh, const char* who) {
   const std::size_t n = mesh.points.size();
   for (std::size_t i = 0; i < n; ++i) {
@@ -109,7 +110,7 @@ namespace {
 template <class EachPoint, class EachTet>
 void write_tetgen_files(const std::string& path, std::size_t points, EachPoint each_point, std::size_t tets,
                         EachTet each_tet) {
-  refuse_nameless(path, "write_tetgen");
+  refuse_nameless(path, "write_tetgen", true);
   const TetgenFiles files = tetgen_files(path);
   detail::OutputFile node(files.node);
   detail::OutputFile ele(files.ele);
@@ -221,7 +222,7 @@ void put_ascii(detail::OutputFile& out, const T* v, std::size_t n, std::size_t p
 }  // namespace
 
 void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, std::span<const CellField> cell_fields) {
-  refuse_nameless(path, "write_vtu");
+  refuse_nameless(path, "write_vtu", false);
   refuse_unwritable(mesh, "write_vtu");
   for (const CellField& f : cell_fields)
     if (f.values.size() != mesh.tets.size())

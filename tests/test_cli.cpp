@@ -179,7 +179,38 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK(r.code == 0);
     CHECK(r.out.find("wrote ") == 0);
     CHECK(r.err.empty());
+    // refine's trace to standard output: the file is the trace, and replays.
+    const std::string traced = d.file("traced.ops");
+    const std::string refine = tool + "refine --domain sphere --size 0.3 --trace /dev/stdout >'" + traced + "' 2>'" +
+                               d.file("refine_err.txt") + "'";
+    CHECK(std::system(refine.c_str()) == 0);
+    CHECK(pdt_test::read_file(d.file("refine_err.txt")).find("vertices") != std::string::npos);
+    CHECK(pdt::read_ops(traced).insert_count() > 0);
+    // /dev/fd/01 is no name the kernel knows (no leading zeros): not taken
+    // for standard output, refused as a missing directory's file would be.
+    const Result zero = run_pdt(d, "gen --points 3 --out /dev/fd/01");
+    CHECK(zero.code == 2);
+    // A descriptor open for reading only: refused before anything is written.
+    const std::string ro = d.file("read_only.txt");
+    pdt_test::write_file(ro, "keep\n");
+    const std::string read_only = tool + "gen --points 3 --out /dev/fd/3 3<'" + ro + "' 2>'" + d.file("ro_err.txt") + "'";
+    const int status = std::system(read_only.c_str());
+    CHECK(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 2);
+    CHECK(pdt_test::read_file(d.file("ro_err.txt")).find("open for reading only") != std::string::npos);
+    CHECK(pdt_test::read_file(ro) == "keep\n");
 #endif
+  }
+  SECTION("a mesh output that names no file is refused before the run") {
+    // TetGen's pair as hidden ".node" and ".ele" (a folder is refused by its
+    // missing extension, and as a directory).
+    for (const std::string& out : {d.file(".node"), d.file(".ELE")}) {
+      INFO(out);
+      const Result r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + out + "'");
+      CHECK(r.code == 2);
+      CHECK(r.out.empty());  // nothing ran
+      CHECK(r.err.find("names no file") != std::string::npos);
+    }
   }
   SECTION("an output and the input that are one file under two names") {
 #ifdef PDT_TOOL_PATH

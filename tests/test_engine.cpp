@@ -434,14 +434,24 @@ TEST_CASE("engine: 16 workers insert 3000 normal points then remove them all", "
 }
 
 TEST_CASE("engine: a worker's idle time is counted, the stretch under way too", "[engine][tsan]") {
-  // After a drain every worker that ran waits for work: the idle seconds grow
-  // while nothing is submitted (stats() counts the stretch under way), by no
-  // more than the workers times the time that passed, and never fall back.
+  // A worker waits for work from the engine's construction on, and after a
+  // drain: the idle seconds grow while nothing is submitted (stats() counts
+  // the stretch under way), by no more than the workers times the time that
+  // passed, and never fall back.
   pdt::Triangulation t;
   const std::vector<Point3> pts = random_points(scaled(20000, 4000), 61);
   tbb::task_arena arena(4);
   arena.execute([&] {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, options_with(4));
+    {
+      // Not started yet: waiting for work all the same, every one of the 4.
+      const auto t0 = std::chrono::steady_clock::now();
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      const double idle = e.stats().total().seconds_idle;
+      const double passed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      REQUIRE(idle >= 4 * 0.045);
+      REQUIRE(idle <= 4 * passed + 0.05);  // made just before t0
+    }
     ErrorSink errors;
     for (const auto& p : pts) e.insert(p, errors.callback());
     e.drain();

@@ -55,7 +55,13 @@ void require_writable_file(const char* option, const std::string& path) {
 }
 
 std::vector<std::string> mesh_output_files(const std::string& out) {
-  if (pdt::support::ends_with_nocase(out, ".vtu")) return {out};
+  // The writers' own rule (write_tetgen, write_vtu), checked before the run.
+  const std::string base = out.substr(out.find_last_of('/') + 1);
+  const bool vtu = pdt::support::ends_with_nocase(out, ".vtu");
+  if (base.empty() || (!vtu && pdt::tetgen_files(base).node == ".node"))
+    throw pdt::Error(pdt::ErrorCode::invalid_argument,
+                     "--out " + out + ": names no file (give it a name such as mesh.vtu or mesh.node)");
+  if (vtu) return {out};
   const pdt::TetgenFiles files = pdt::tetgen_files(out);
   return {files.node, files.ele};
 }

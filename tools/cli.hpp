@@ -52,7 +52,8 @@ void require_writable_dir(const char* option, const std::string& path);
 // in place (an existing device or FIFO, or a name under /dev or /proc).
 void require_writable_file(const char* option, const std::string& path);
 // The files a mesh output writes: FILE.vtu itself, or TetGen's .node and .ele
-// pair for a name ending in .node or .ele (pdt::tetgen_files).
+// pair for a name ending in .node or .ele (pdt::tetgen_files). A name that
+// names no file ("", a folder, ".node") is refused (pdt::Error invalid_argument).
 std::vector<std::string> mesh_output_files(const std::string& out);
 // An operation stream's output name: refused (usage) if it ends in .gz, since
 // pdt writes streams uncompressed (and reads them gzipped), or in an

@@ -227,7 +227,8 @@ int cmd_refine(Args args) {
       row("wrote", files.node + " and " + files.ele);
     }
   }
-  if (trace) row("trace", *trace + " (pdt run " + *trace + " --threads N replays it)");
+  if (trace)
+    row("trace", writes_standard_output(*trace) ? *trace : *trace + " (pdt run " + *trace + " --threads N replays it)");
   std::fflush(summary_stream());
   return status;
 }

@@ -81,7 +81,10 @@ struct WorkerStats {
   std::uint64_t steals = 0;     // blocks it served away from its home
   std::uint64_t escalated = 0;  // operations it ran with the world stopped after escalate_after rollbacks
   double seconds_asleep = 0;
-  double seconds_idle = 0;      // suspended with no block it could claim (waiting for work)
+  // Waiting for work: suspended with no block it could claim, or not started
+  // yet. Exact when no worker runs (after drain()); while they run, a stretch
+  // ending at that moment may be counted twice in one snapshot.
+  double seconds_idle = 0;
   double max_rollbacks_per_completed = 0;  // the paper's "Max #Rollbacks/#compl. ops", per worker
 };
 

@@ -43,8 +43,11 @@ struct CellField {
 // optional cell fields (invalid_argument if one's size differs from the
 // tetrahedra's). A tetrahedron naming a point that is not there, or a point
 // with a NaN or infinite coordinate, is refused (invalid_argument) before
-// anything is written. Writes go through a temporary file and a rename;
-// failure throws io_failure.
+// anything is written, and so is a path that names no file ("", a folder
+// "out/", or for TetGen ".node" alone). Writes go through a temporary file
+// and a rename, except to what cannot be renamed onto (a device, a FIFO, a
+// descriptor by name: /dev/stdout, /dev/fd/N), written in place; failure
+// throws io_failure.
 void write_tetgen(const std::string& path, const Mesh& mesh);
 // The same straight from a triangulation, a line at a time, without copying
 // the mesh first (for large meshes). Nodes numbered in vertex-id order.

@@ -87,7 +87,10 @@ void write_ops(const std::string& path, const OpStream& stream);
 // destroyed without close() (an exception, a failed run) leaves no partial
 // stream and an older file of that name as it was. A path that is not a
 // regular file (a FIFO, /dev/stdout) is written in place, as every pdt writer
-// does; the binary form announces its count in its header, patched by
+// does: a descriptor of this process by name (/dev/stdout, /dev/fd/N) from
+// where it stands, after what was written there before and without
+// truncating it (a descriptor open for reading only is refused, io_failure);
+// the binary form announces its count in its header, patched by
 // close(), so it is refused (invalid_argument) for a path it cannot seek in.
 // Each operation is checked as read_ops would check it (finite, inside the
 // box, 'remove k' of an insertion written and not undone yet) and refused

@@ -376,10 +376,26 @@ Mesh read_tetgen(const std::string& path) {
   const std::uint64_t count = count_field(fields[0], "tetrahedron count");
   const std::uint64_t per = count_field(fields[1], "nodes per tetrahedron");
   if (per != 4 && per != 10) f.fail("nodes per tetrahedron is " + std::to_string(per) + "; expected 4 (or 10)");
+  if (n > 3) f.fail("header has " + std::to_string(n) + " fields; expected '<#tetrahedra> 4 <#attributes>'");
+  const std::uint64_t attributes = n == 3 ? count_field(fields[2], "attribute count") : 0;
+  if (attributes > 1000) f.fail("attribute count " + std::to_string(attributes) + " is not plausible");
+  // Every line: its index (the first numbered 0 or 1, then consecutive),
+  // the nodes, the attributes; nothing more, nothing less.
+  const std::uint64_t fields_per_line = 1 + per + attributes;
+  std::uint64_t first_index = 0;
   m.tets.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(count, 1u << 22)));
   for (std::uint64_t i = 0; i < count; ++i) {
     if (!next(n)) f.fail("file ends after " + std::to_string(i) + " of " + std::to_string(count) + " tetrahedra");
-    if (n < 1 + per) f.fail("tetrahedron line has " + std::to_string(n) + " field(s); expected 'index a b c d'");
+    if (n != fields_per_line)
+      f.fail("tetrahedron line has " + std::to_string(n) + " field(s); the header asks for " +
+             std::to_string(fields_per_line) + " (index, " + std::to_string(per) + " nodes, " +
+             std::to_string(attributes) + " attribute(s))");
+    const std::uint64_t index = count_field(fields[0], "tetrahedron index");
+    if (i == 0 && index > 1) f.fail("the first tetrahedron is numbered " + std::to_string(index) + "; expected 0 or 1");
+    if (i == 0) first_index = index;
+    if (index != first_index + i)
+      f.fail("tetrahedron index " + std::to_string(index) + "; expected " + std::to_string(first_index + i) +
+             " (consecutive)");
     std::array<std::uint32_t, 4> t{};
     for (int k = 0; k < 4; ++k) {  // the 4 corners; quadratic tets' edge nodes are ignored
       const std::uint64_t v = count_field(fields[1 + k], "node index");

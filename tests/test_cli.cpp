@@ -201,6 +201,43 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK(pdt_test::read_file(ro) == "keep\n");
 #endif
   }
+  SECTION("outputs through links, over protected files, beside a .smesh's nodes") {
+#ifdef PDT_TOOL_PATH
+    const std::string ops = d.file("small.ops");
+    REQUIRE(run_pdt(d, "gen --points 200 --out '" + ops + "'").code == 0);
+    // A link to a file in a missing folder: refused before the run.
+    std::filesystem::create_symlink(d.file("missing/m.node"), d.file("dangling.node"));
+    Result r = run_pdt(d, "run '" + ops + "' --out '" + d.file("dangling.node") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.out.empty());
+    CHECK(r.err.find("cannot write in") != std::string::npos);
+    // A link to a file not there yet: made where the link points, whole.
+    std::filesystem::create_symlink("target.vtu", d.file("link.vtu"));
+    r = run_pdt(d, "run '" + ops + "' --out '" + d.file("link.vtu") + "'");
+    CHECK(r.code == 0);
+    CHECK(std::filesystem::is_symlink(d.file("link.vtu")));
+    CHECK(std::filesystem::file_size(d.file("target.vtu")) > 0);
+    // A private file stays private when replaced.
+    pdt_test::write_file(d.file("private.vtu"), "old\n");
+    std::filesystem::permissions(d.file("private.vtu"), std::filesystem::perms::owner_read |
+                                                            std::filesystem::perms::owner_write);
+    r = run_pdt(d, "run '" + ops + "' --out '" + d.file("private.vtu") + "'");
+    CHECK(r.code == 0);
+    CHECK(std::filesystem::status(d.file("private.vtu")).permissions() ==
+          (std::filesystem::perms::owner_read | std::filesystem::perms::owner_write));
+    // A .smesh without nodes reads the .node beside it: not an output.
+    pdt_test::write_file(d.file("m.node"), "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 0.3 0.3 0.3\n");
+    pdt_test::write_file(d.file("m.smesh"), "0 3 0 0\n0 0\n");
+    r = run_pdt(d, "run '" + d.file("m.smesh") + "' --out '" + d.file("m.node") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("may take its points from") != std::string::npos);
+    // --in-flight where nothing is submitted one at a time.
+    r = run_pdt(d, "run '" + ops + "' --in-flight 5");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("--in-flight applies to") != std::string::npos);
+    CHECK(run_pdt(d, "run '" + ops + "' --in-flight 5 --threads 2").code == 0);
+#endif
+  }
   SECTION("a mesh output that names no file is refused before the run") {
     // TetGen's pair as hidden ".node" and ".ele" (a folder is refused by its
     // missing extension, and as a directory).

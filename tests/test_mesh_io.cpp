@@ -402,6 +402,19 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
   REQUIRE(e);
   CHECK(e->code() == pdt::ErrorCode::bad_format);
   CHECK(std::string(e->what()).find("one.ele:2:") != std::string::npos);
+  // A line that is not what the header says: a field more than its nodes and
+  // attributes, an attribute count that is no number, an index out of turn.
+  for (const auto& [ele, what] : {std::pair{"1 4 0\n1 1 2 3 4 9\n", "the header asks for 5"},
+                                  std::pair{"1 4 xyz\n1 1 2 3 4\n", "attribute count 'xyz'"},
+                                  std::pair{"2 4 0\n1 1 2 3 4\n1 1 2 4 3\n", "tetrahedron index 1; expected 2"},
+                                  std::pair{"1 4 0 0\n1 1 2 3 4\n", "header has 4 fields"}}) {
+    INFO(ele);
+    write_file(d.file("one.ele"), ele);
+    e = catch_error([&] { pdt::read_tetgen(d.file("one.node")); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::bad_format);
+    CHECK(std::string(e->what()).find(what) != std::string::npos);
+  }
   // More rows than the header announces: a format error at the first extra
   // one (in either file); a trailing comment is fine.
   write_file(d.file("one.ele"), "1 4 0\n1 1 2 3 4\n# by TetGen\n2 1 2 3 4\n");

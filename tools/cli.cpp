@@ -48,6 +48,20 @@ void require_writable_file(const char* option, const std::string& path) {
       throw pdt::Error(pdt::ErrorCode::io_failure,
                        std::string(option) + ": cannot write '" + path + "': it is a directory");
     if (!S_ISREG(st.st_mode)) return;  // a device or FIFO: written in place, nothing made in its directory
+    // A file that may not be written is not replaced either (OutputFile).
+    if (::access(path.c_str(), W_OK) != 0)
+      throw pdt::Error(pdt::ErrorCode::io_failure,
+                       std::string(option) + ": cannot write '" + path + "': " + std::strerror(errno));
+  } else if (::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+    // A link to a file not there yet: the file is made where the link points.
+    std::string link(4096, '\0');
+    const ssize_t n = ::readlink(path.c_str(), link.data(), link.size());
+    if (n > 0) {
+      link.resize(static_cast<std::size_t>(n));
+      if (link[0] != '/') link = path.substr(0, path.find_last_of('/') + 1) + link;
+      require_writable_dir(option, link);
+      return;
+    }
   }
   // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too (OutputFile).
   if (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) return;

@@ -45,7 +45,8 @@ const char* const run_usage =
     "                  variables (see README); --threads sets the workers, not PDT_WORKERS\n"
     "  --in-order      point files: insert in file order, one point at a time\n"
     "  --in-flight N   engine: at most N operations submitted and not yet done (default\n"
-    "                  65536, or 4096 per worker if more); the reader waits (back-pressure)\n"
+    "                  65536, or 4096 per worker if more); the reader waits (back-pressure);\n"
+    "                  with --threads, for a stream or a point file read --in-order\n"
     "  --out FILE      write the final mesh: FILE.node (TetGen .node + .ele) or FILE.vtu\n"
     "                  (VTK, binary, zlib-compressed; --vtu-ascii for text)\n"
     "  --vtu-ascii     write .vtu as ASCII text\n"
@@ -408,8 +409,18 @@ int cmd_run(Args args) {
     for (const std::string& f : mesh_output_files(*out)) {
       require_writable_file("--out", f);
       if (same_file(f, *input)) usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);
+      // A .smesh whose header holds no nodes reads them from the .node beside it.
+      if (ends_with_nocase(*input, ".smesh")) {
+        const std::string nodes = input->substr(0, input->size() - 6) + ".node";
+        if (same_file(f, nodes))
+          usage_error(run_usage, "--out " + *out + " would overwrite " + nodes + ", where the input " + *input +
+                                     " may take its points from");
+      }
     }
   }
+  if (in_flight && (!workers || (is_point_file(*input) && !in_order)))
+    usage_error(run_usage, "--in-flight applies to the engine's operations one at a time: give --threads N, and for "
+                           "a point file --in-order (a batch submits every point at once)");
   if (vtu_ascii && out_kind != OutKind::vtu)
     usage_error(run_usage, "--vtu-ascii applies to a .vtu output; give --out FILE.vtu (or drop --vtu-ascii)");
   if (in_order && !is_point_file(*input))

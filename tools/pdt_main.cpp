@@ -85,6 +85,10 @@ int main(int argc, char** argv) {
   // A closed pipe on stdout (pdt run ... | head) is then a write error that
   // ends the run with one "pdt: ..." line and status 2, not a silent SIGPIPE.
   std::signal(SIGPIPE, SIG_IGN);
+  // Past a file-size limit (ulimit -f) a write then fails with EFBIG, which
+  // discards the temporaries as any write error does, instead of SIGXFSZ
+  // killing the process and leaving them.
+  std::signal(SIGXFSZ, SIG_IGN);
   for (int sig : {SIGINT, SIGTERM, SIGHUP})
     if (std::signal(sig, on_interrupt) == SIG_IGN) std::signal(sig, SIG_IGN);  // ignored by the parent: stays so
   try {

@@ -113,10 +113,13 @@ class FdWriter {
 // step fails, or the object is destroyed without commit(), the temporary file
 // is removed. Errors are io_failure naming the target path.
 // The target is what the path names: through a symbolic link, the file it
-// points to (the link stays); a device, FIFO or socket (/dev/null, a pipe), or
-// a descriptor by name (/dev/stdout, /dev/fd/N, /proc/...), is written in
-// place, since no rename could stand in for it, and so is the file behind a
-// dangling link. Those direct writes cannot be undone. A descriptor of this
+// points to (the link stays), made there if it is not there yet; a device,
+// FIFO or socket (/dev/null, a pipe), or a descriptor by name (/dev/stdout,
+// /dev/fd/N, /proc/...), is written in place, since no rename could stand in
+// for it, and so is the file behind a looping link or a chain of links to a
+// missing file. Those direct writes cannot be undone. An existing target is
+// replaced only if this process may write it, and the new file keeps its
+// permissions. A descriptor of this
 // process by name (/dev/stdout, /dev/fd/1) is written through a copy of it,
 // from where it stands: after what the process wrote there before, without
 // truncating it (the shell's > did, or >> appends).

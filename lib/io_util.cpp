@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <iterator>
+#include <optional>
 #include <string_view>
 
 namespace pdt::detail {
@@ -394,19 +395,19 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
     std::string link(4096, '\0');
     const ssize_t n = ::readlink(path.c_str(), link.data(), link.size());
     link.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+    // What the link names, a relative one from the link's folder.
+    const std::string named = link.empty() || link[0] == '/' ? link : path.substr(0, path.find_last_of('/') + 1) + link;
     char* resolved = ::realpath(path.c_str(), nullptr);
     struct stat lt;
     if (link.rfind("/proc/", 0) == 0) {
       direct_ = true;  // /dev/stdout -> /proc/self/fd/1
     } else if (resolved) {
       target_ = resolved;
-    } else if (!link.empty() && ::lstat(link[0] == '/' ? link.c_str()
-                                                       : (path.substr(0, path.find_last_of('/') + 1) + link).c_str(),
-                                        &lt) != 0 && errno == ENOENT) {
+    } else if (!named.empty() && ::lstat(named.c_str(), &lt) != 0 && errno == ENOENT) {
       // A link to a file not there yet: made there, through a temporary
       // beside it and a rename, as any other (a temporary that cannot be
       // made there says why).
-      target_ = link[0] == '/' ? link : path.substr(0, path.find_last_of('/') + 1) + link;
+      target_ = named;
     } else {
       direct_ = true;  // a looping link, or one through another: open follows it, or says why not
     }
@@ -427,12 +428,10 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   // A file there already: replaced only if it could be written (a read-only
   // file is refused, as the shell's > would), and the new one keeps its
   // permissions (a private file stays private).
-  mode_t keep_mode = 0;
-  bool keep = false;
+  std::optional<mode_t> keep_mode;
   if (::stat(target_.c_str(), &st) == 0) {
     if (::access(target_.c_str(), W_OK) != 0) throw_io_error("cannot write", path, errno);
     keep_mode = st.st_mode & 07777;
-    keep = true;
   }
   // Unique name in the target's directory: pid + per-process counter; O_EXCL
   // makes a collision with a stale file from another process retry.
@@ -446,7 +445,7 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   }
   if (fd_ < 0) throw_io_error("cannot create", path, EEXIST);
   temp_slot_ = track_temporary(temp_);
-  if (keep && ::fchmod(fd_, keep_mode) != 0) {
+  if (keep_mode && ::fchmod(fd_, *keep_mode) != 0) {
     const int err = errno;
     discard();
     throw_io_error("cannot set the permissions of", path, err);

@@ -17,6 +17,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <iterator>
+#include <memory>
+#include <new>
 #include <optional>
 #include <string_view>
 
@@ -144,20 +146,97 @@ constexpr std::size_t kReadChunk = 1 << 20;
 constexpr std::size_t kMaxLine = 1 << 20;
 }  // namespace
 
+// zlib's inflate state over gzip members. Invariant: in == [0, in.size()) is
+// the raw read buffer; zs.next_in/avail_in the part of it not yet inflated;
+// raw_read counts the file's bytes read so far, so raw_read - zs.avail_in is
+// the file offset of the next byte to inflate. in_member: a member has begun
+// (its header's first bytes seen) and not ended.
+struct InputFile::Gunzip {
+  z_stream zs{};
+  std::vector<unsigned char> in = std::vector<unsigned char>(1 << 17);
+  std::uint64_t raw_read = 0;
+  bool in_member = false;
+  Gunzip() {
+    if (inflateInit2(&zs, 16 + MAX_WBITS) != Z_OK) throw std::bad_alloc();  // 16: gzip framing only
+  }
+  ~Gunzip() { inflateEnd(&zs); }
+  Gunzip(const Gunzip&) = delete;
+  Gunzip& operator=(const Gunzip&) = delete;
+};
+
 InputFile::InputFile(const std::string& path) : path_(path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) throw_io_error("cannot open", path, errno);
   struct stat st;
-  if (::stat(path.c_str(), &st) != 0) throw_io_error("cannot open", path, errno);
-  if (S_ISDIR(st.st_mode)) throw_io_error("cannot read", path, EISDIR);
-  errno = 0;
-  gzFile gz = gzopen(path.c_str(), "rb");
-  if (gz == nullptr) throw_io_error("cannot open", path, errno ? errno : ENOMEM);
-  gzbuffer(gz, 1 << 17);
-  gz_ = gz;
-  buf_.resize(kReadChunk);
+  const int err = ::fstat(fd_, &st) != 0 ? errno : S_ISDIR(st.st_mode) ? EISDIR : 0;
+  if (err != 0) {
+    ::close(fd_);
+    throw_io_error(err == EISDIR ? "cannot read" : "cannot open", path, err);
+  }
+  try {
+    buf_.resize(kReadChunk);
+  } catch (...) {
+    ::close(fd_);
+    throw;
+  }
 }
 
 InputFile::~InputFile() {
-  if (gz_ != nullptr) gzclose_r(static_cast<gzFile>(gz_));
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::size_t InputFile::read_raw(char* dst, std::size_t n) {
+  while (true) {
+    const ssize_t got = ::read(fd_, dst, n);
+    if (got >= 0) return static_cast<std::size_t>(got);
+    if (errno != EINTR) throw_io_error("cannot read", path_, errno);
+  }
+}
+
+std::size_t InputFile::inflate_into(char* dst, std::size_t n) {
+  Gunzip& g = *gunzip_;
+  z_stream& zs = g.zs;
+  n = std::min<std::size_t>(n, 1u << 30);
+  zs.next_out = reinterpret_cast<unsigned char*>(dst);
+  zs.avail_out = static_cast<uInt>(n);
+  // Reads more raw bytes behind the unconsumed ones; false at the end of the file.
+  auto read_more = [&] {
+    if (zs.avail_in > 0 && zs.next_in != g.in.data()) std::memmove(g.in.data(), zs.next_in, zs.avail_in);
+    zs.next_in = g.in.data();
+    const std::size_t got =
+        read_raw(reinterpret_cast<char*>(g.in.data()) + zs.avail_in, g.in.size() - zs.avail_in);
+    g.raw_read += got;
+    zs.avail_in += static_cast<uInt>(got);
+    return got > 0;
+  };
+  while (zs.avail_out == n) {
+    if (!g.in_member) {
+      // Between members: the end of the file, or the next member's magic.
+      while (zs.avail_in < 2 && read_more()) {
+      }
+      if (zs.avail_in == 0) break;
+      if (zs.avail_in < 2 || zs.next_in[0] != 0x1f || zs.next_in[1] != 0x8b)
+        throw Error(ErrorCode::bad_format,
+                    path_ + ": other data follows the gzip data (from byte " + std::to_string(g.raw_read - zs.avail_in) +
+                        " of the file; was something appended to a .gz file?): decompress the file, or cut it after "
+                        "the gzip data");
+      if (inflateReset(&zs) != Z_OK) throw std::bad_alloc();
+      g.in_member = true;
+    }
+    if (zs.avail_in == 0 && !read_more())
+      throw Error(ErrorCode::bad_format, path_ + ": truncated compressed data (the gzip data ends early)");
+    const int r = inflate(&zs, Z_NO_FLUSH);
+    if (r == Z_STREAM_END) {
+      g.in_member = false;
+    } else if (r == Z_MEM_ERROR) {
+      throw std::bad_alloc();
+    } else if (r != Z_OK && !(r == Z_BUF_ERROR && zs.avail_in == 0)) {
+      throw Error(ErrorCode::bad_format, path_ + ": corrupt compressed data (" +
+                                             (zs.msg != nullptr ? std::string(zs.msg) : std::string("zlib error ") + std::to_string(r)) +
+                                             ")");
+    }
+  }
+  return n - zs.avail_out;
 }
 
 bool InputFile::fill() {
@@ -169,27 +248,38 @@ bool InputFile::fill() {
     pos_ = 0;
   }
   if (end_ == buf_.size()) buf_.resize(buf_.size() * 2);
-  auto gz = static_cast<gzFile>(gz_);
-  errno = 0;
-  int got = gzread(gz, buf_.data() + end_, static_cast<unsigned>(buf_.size() - end_));
-  if (got < 0) {
-    int errnum = 0;
-    const char* msg = gzerror(gz, &errnum);
-    if (errnum == Z_ERRNO) throw_io_error("cannot read", path_, errno ? errno : EIO);
-    throw Error(ErrorCode::bad_format, path_ + ": corrupt compressed data (" + msg + ")");
+  if (!detected_) {
+    // The first bytes say which: gzip's magic, or a plain file. The read goes
+    // into the buffer, where a plain file's bytes stay; a gzip file's move to
+    // the inflater's input.
+    std::size_t got = 0;
+    while (got < 2) {
+      const std::size_t more = read_raw(buf_.data() + got, buf_.size() - got);
+      if (more == 0) break;
+      got += more;
+    }
+    detected_ = true;
+    if (got >= 2 && static_cast<unsigned char>(buf_[0]) == 0x1f && static_cast<unsigned char>(buf_[1]) == 0x8b) {
+      gunzip_ = std::make_unique<Gunzip>();
+      Gunzip& g = *gunzip_;
+      if (g.in.size() < got) g.in.resize(got);
+      std::memcpy(g.in.data(), buf_.data(), got);
+      g.zs.next_in = g.in.data();
+      g.zs.avail_in = static_cast<uInt>(got);
+      g.raw_read = got;
+    } else {
+      end_ = got;
+      if (got == 0) eof_ = true;
+      return got > 0;
+    }
   }
+  const std::size_t got = gunzip_ ? inflate_into(buf_.data() + end_, buf_.size() - end_)
+                                  : read_raw(buf_.data() + end_, buf_.size() - end_);
   if (got == 0) {
-    int errnum = 0;
-    const char* msg = gzerror(gz, &errnum);
-    // Z_BUF_ERROR at the end: the gzip stream stopped in the middle.
-    if (errnum == Z_BUF_ERROR)
-      throw Error(ErrorCode::bad_format, path_ + ": truncated compressed data (" + msg + ")");
-    if (errnum == Z_ERRNO) throw_io_error("cannot read", path_, errno ? errno : EIO);
-    if (errnum != Z_OK) throw Error(ErrorCode::bad_format, path_ + ": corrupt compressed data (" + msg + ")");
     eof_ = true;
     return false;
   }
-  end_ += static_cast<std::size_t>(got);
+  end_ += got;
   return true;
 }
 
@@ -249,6 +339,14 @@ std::string_view InputFile::peek(std::size_t n) {
   while (end_ - pos_ < n && fill()) {
   }
   return std::string_view(buf_.data() + pos_, std::min(n, end_ - pos_));
+}
+
+void InputFile::skip_utf8_bom() {
+  assert(consumed_ == 0 && line_ == 0);
+  if (peek(3) == std::string_view("\xEF\xBB\xBF", 3)) {
+    pos_ += 3;
+    consumed_ += 3;
+  }
 }
 
 void InputFile::fail(const std::string& what) const { fail_at_line(line_, what); }

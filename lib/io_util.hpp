@@ -11,6 +11,7 @@
 // "cannot write 'out.ops': No space left on device".
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -50,9 +51,14 @@ void append_uint(std::string& out, std::uint64_t v);
 
 // ---- reading ---------------------------------------------------------------
 
-// Buffered sequential reader over a file, transparently gunzipping gzip data
-// (zlib's gzread passes plain files through unchanged). Lines end at '\n'; a
-// trailing '\r' is dropped. Line views stay valid until the next read call.
+// Buffered sequential reader over a file, transparently gunzipping gzip data.
+// A file that starts with gzip's magic bytes (1f 8b) is read as one or more
+// gzip members back to back (what `cat a.gz b.gz` makes, as gzip -d reads
+// it); anything else after a member's end (plain bytes appended to a gzip
+// file) is refused as bad_format, as are a truncated member and corrupt data:
+// what is read is the whole file or an error, never a silent prefix. Any
+// other file is read as it is. Lines end at '\n'; a trailing '\r' is
+// dropped. Line views stay valid until the next read call.
 class InputFile {
  public:
   // Throws io_failure ("cannot open 'path': No such file or directory").
@@ -67,6 +73,9 @@ class InputFile {
   std::size_t read_bytes(void* dst, std::size_t n);
   // Up to n bytes from the current position without consuming them.
   std::string_view peek(std::size_t n);
+  // At the start of a text file: consumes a UTF-8 byte order mark (EF BB BF),
+  // which some editors write, if there is one.
+  void skip_utf8_bom();
 
   const std::string& path() const { return path_; }
   std::uint64_t line() const { return line_; }  // number of the last line read (1-based)
@@ -77,11 +86,17 @@ class InputFile {
 
  private:
   bool fill();  // reads more into the buffer; false when nothing more
-  void* gz_ = nullptr;
+  // Up to n raw (on-disk) bytes into dst; 0 only at the end of the file.
+  std::size_t read_raw(char* dst, std::size_t n);
+  std::size_t inflate_into(char* dst, std::size_t n);  // gzip: up to n decompressed bytes; 0 at the end
+  struct Gunzip;                                       // zlib's state (io_util.cpp)
+  int fd_ = -1;
+  std::unique_ptr<Gunzip> gunzip_;  // null: a plain file
   std::string path_;
   std::vector<char> buf_;
   std::size_t pos_ = 0, end_ = 0;
   bool eof_ = false;
+  bool detected_ = false;  // the first bytes were read: gunzip_ set for a gzip file
   std::uint64_t line_ = 0;
   std::uint64_t consumed_ = 0;
 };

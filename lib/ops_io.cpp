@@ -216,6 +216,12 @@ OpReader::OpReader(const std::string& path) : state_(std::make_unique<State>(pat
   if (st.binary) {
     st.read_binary_header();
   } else {
+    // "PDTOPS" and something else than "1\0": a binary stream of another
+    // version, not text with an odd first word.
+    if (head.substr(0, 6) == std::string_view(kMagic, 6))
+      throw Error(ErrorCode::bad_format, st.f.path() + ": a binary operation stream of another version (magic " +
+                                             detail::quote(head) + "); this pdt reads version 1 (magic 'PDTOPS1\\x00')");
+    st.f.skip_utf8_bom();
     // The box, if any, comes before the first operation: read up to it.
     Operation first;
     if (st.next_text(first)) st.pending = first;

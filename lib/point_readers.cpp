@@ -65,6 +65,7 @@ std::vector<Point3> read_xyz(InputFile& f) {
   std::vector<Point3> pts;
   std::string_view fields[3];
   std::string_view line;
+  f.skip_utf8_bom();
   while (f.read_line(line)) {
     std::size_t n = split_fields(strip_comment(line), fields, 3);
     if (n == 0) continue;

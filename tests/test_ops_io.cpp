@@ -6,6 +6,7 @@
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <catch2/catch.hpp>
 #include <cfloat>
@@ -23,6 +24,7 @@
 #include "common/io_test_util.hpp"
 #include "io_util.hpp"
 #include "live_insertions.hpp"  // the readers' and the writer's live set, tested alone
+#include "pdt/io.hpp"
 #include "pdt/ops.hpp"
 
 using pdt_test::catch_error;
@@ -276,6 +278,92 @@ TEST_CASE("missing or unreadable ops files give io_failure", "[io]") {
   REQUIRE(e2);
   CHECK(e2->code() == pdt::ErrorCode::io_failure);
   CHECK(std::string(e2->what()).find("Is a directory") != std::string::npos);
+}
+
+namespace {
+// data as one gzip member (zlib's deflate with gzip framing).
+std::string gzip_member(const std::string& data) {
+  z_stream zs{};
+  REQUIRE(deflateInit2(&zs, 6, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY) == Z_OK);
+  std::string out(deflateBound(&zs, data.size()) + 32, '\0');
+  zs.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
+  zs.avail_in = static_cast<uInt>(data.size());
+  zs.next_out = reinterpret_cast<Bytef*>(out.data());
+  zs.avail_out = static_cast<uInt>(out.size());
+  REQUIRE(deflate(&zs, Z_FINISH) == Z_STREAM_END);
+  out.resize(zs.total_out);
+  deflateEnd(&zs);
+  return out;
+}
+}  // namespace
+
+TEST_CASE("gzipped streams: members back to back are read whole; appended bytes, truncation, corruption refused",
+          "[io]") {
+  TempDir d;
+  std::string text = "box 0 0 0 1 1 1\n";
+  for (int k = 0; k < 3000; ++k) text += "i 0." + std::to_string(100000 + 7 * k) + " 0.5 0.25\nr " + std::to_string(k) + "\n";
+  const pdt::OpStream plain = [&] {
+    write_file(d.file("plain.ops"), text);
+    return pdt::read_ops(d.file("plain.ops"));
+  }();
+  REQUIRE(plain.ops.size() == 6000);
+  const std::string gz = gzip_member(text);
+  auto read = [&](const std::string& name, const std::string& bytes) {
+    write_file(d.file(name), bytes);
+    return pdt::read_ops(d.file(name));
+  };
+  auto refused = [&](const std::string& name, const std::string& bytes, const std::string& says) {
+    write_file(d.file(name), bytes);
+    auto e = catch_error([&] { pdt::read_ops(d.file(name)); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::bad_format);
+    INFO(e->what());
+    CHECK(std::string(e->what()).find(says) != std::string::npos);
+  };
+  SECTION("one member, and the same text split into members (what cat a.gz b.gz makes)") {
+    CHECK(read("one.ops.gz", gz).ops.size() == plain.ops.size());
+    const std::size_t cut = text.find('\n', text.size() / 2) + 1;
+    const auto two = read("two.ops.gz", gzip_member(text.substr(0, cut)) + gzip_member("") + gzip_member(text.substr(cut)));
+    REQUIRE(two.ops.size() == plain.ops.size());
+    CHECK(two.ops.back().target == plain.ops.back().target);
+  }
+  SECTION("plain bytes appended to the gzip data: refused, with the offset where they start") {
+    refused("app.ops.gz", gz + "i 0.5 0.5 0.5\n", "other data follows the gzip data (from byte " + std::to_string(gz.size()));
+    refused("one-byte.ops.gz", gz + "\x1f", "from byte " + std::to_string(gz.size()));
+    refused("zeros.ops.gz", gz + std::string(512, '\0'), "other data follows the gzip data");
+  }
+  SECTION("a member cut short or damaged") {
+    for (std::size_t keep : {std::size_t{2}, std::size_t{10}, gz.size() / 2, gz.size() - 1})
+      refused("cut.ops.gz", gz.substr(0, keep), "truncated compressed data");
+    std::string bad = gz;
+    for (std::size_t i = 40; i < 48; ++i) bad[i] = static_cast<char>(bad[i] ^ 0x5a);
+    refused("bad.ops.gz", bad, "corrupt compressed data");
+  }
+  SECTION("a plain file that starts like gzip's magic but is not one is read as text") {
+    refused("magic1.ops", "\x1f", "unknown verb");
+    CHECK(read("empty.ops", "").ops.empty());
+  }
+}
+
+TEST_CASE("a UTF-8 byte order mark before a text stream is skipped; a binary stream of another version is named",
+          "[io]") {
+  TempDir d;
+  write_file(d.file("bom.ops"), "\xEF\xBB\xBF" "box 0 0 0 1 1 1\ni 0.5 0.5 0.5\nr 0\n");
+  const auto s = pdt::read_ops(d.file("bom.ops"));
+  REQUIRE(s.box);
+  CHECK(s.ops.size() == 2);
+  write_file(d.file("bom.xyz"), "\xEF\xBB\xBF" "0 0 0\n1 0 0\n");
+  CHECK(pdt::read_points(d.file("bom.xyz")).size() == 2);
+  write_file(d.file("half.ops"), "\xEF\xBB" "i 0 0 0\n");  // not a byte order mark: bytes of a verb
+  auto e = catch_error([&] { pdt::read_ops(d.file("half.ops")); });
+  REQUIRE(e);
+  CHECK(std::string(e->what()).find("half.ops:1: unknown verb") != std::string::npos);
+  write_file(d.file("v2.opsb"), std::string("PDTOPS2\0", 8) + std::string(80, '\0'));
+  e = catch_error([&] { pdt::read_ops(d.file("v2.opsb")); });
+  REQUIRE(e);
+  CHECK(e->code() == pdt::ErrorCode::bad_format);
+  CHECK(std::string(e->what()).find("a binary operation stream of another version (magic 'PDTOPS2\\x00')") !=
+        std::string::npos);
 }
 
 TEST_CASE("write_ops refuses streams read_ops would reject, writing nothing", "[io]") {

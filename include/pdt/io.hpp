@@ -12,7 +12,7 @@
 namespace pdt {
 
 // Reads the points of a point-set file, by extension: .xyz (x y z per line,
-// extra columns ignored), .xyz.gz, .ply (ascii or binary_little_endian; only
+// extra columns ignored), .xyz.gz (gzip read as read_ops reads it), .ply (ascii or binary_little_endian; only
 // the 'vertex' element's x y z), .off (vertices only), .node (TetGen),
 // .smesh (TetGen PLC node section). Throws pdt::Error(bad_format) with file and
 // line, or pdt::Error(io_failure).

@@ -65,7 +65,9 @@ class OpReader {
 };
 
 // Reads a stream; the format is chosen by content (binary magic) not by name
-// (either form may also be gzip-compressed). Throws pdt::Error(bad_format)
+// (either form may also be gzip-compressed: one member or several back to
+// back; a truncated or damaged member, or other bytes after the gzip data,
+// are bad_format). Throws pdt::Error(bad_format)
 // naming file and line (binary: operation index) for a malformed stream:
 // unknown verb, missing or extra field, NaN/Inf or out-of-range number, box
 // after operations or twice, a box with lo > hi, an inserted point outside the

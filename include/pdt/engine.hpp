@@ -165,7 +165,9 @@ class Engine {
   using Callback = std::function<void(const OpResult&)>;
   using Ticket = std::uint64_t;  // numbers the insertions submitted to this engine, from 0
 
-  // Attaches to t. Points outside `domain` are refused. arena: where workers
+  // Attaches to t. Points outside `domain` are refused. Vertices t already
+  // has outside it stay, and may be removed through the engine (their
+  // operations go to the nearest block). arena: where workers
   // run (it must outlive the engine, as t must); null = the caller's current
   // arena, attached. Throws pdt::Error(invalid_argument)
   // for a bad domain or option, or when another engine is attached to t.
@@ -200,7 +202,9 @@ class Engine {
   LocateAwaitable locate(const Point3& p);
   NearestAwaitable nearest_vertex(const Point3& p);  // no_vertex if empty
   // Runs fn on h's cell under the engine's locks if that incarnation is still
-  // live; co_await gives whether it was (false: dead, fn not called).
+  // live; co_await gives whether it was (false: dead, fn not called). fn runs
+  // on a worker; what it throws is a client error (counted, rethrown by the
+  // next drain()), not the operation's: the visit still gives true.
   VisitAwaitable visit(CellHandle h, CellVisitor fn);
 
   // -- callback forms (callback may be empty): bad input throws pdt::Error at

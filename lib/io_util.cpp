@@ -146,6 +146,30 @@ constexpr std::size_t kReadChunk = 1 << 20;
 constexpr std::size_t kMaxLine = 1 << 20;
 }  // namespace
 
+namespace {
+
+// The descriptor of this process that a path names (/dev/stdin, /dev/stdout,
+// /dev/stderr, /dev/fd/N, /proc/self/fd/N) when it is open; -1 for any other
+// path.
+int own_descriptor(const std::string& path) {
+  int fd = -1;
+  if (path == "/dev/stdin") fd = 0;
+  else if (path == "/dev/stdout") fd = 1;
+  else if (path == "/dev/stderr") fd = 2;
+  else {
+    std::string_view digits;
+    for (std::string_view prefix : {"/dev/fd/", "/proc/self/fd/"})
+      if (path.rfind(prefix, 0) == 0) digits = std::string_view(path).substr(prefix.size());
+    // As the kernel spells them: no sign, no leading zero (/dev/fd/01 is no name).
+    if (digits.empty() || (digits[0] == '0' && digits.size() > 1)) return -1;
+    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), fd);
+    if (ec != std::errc{} || end != digits.data() + digits.size()) return -1;
+  }
+  return ::fcntl(fd, F_GETFD) == -1 ? -1 : fd;
+}
+
+}  // namespace
+
 // zlib's inflate state over gzip members. Invariant: in == [0, in.size()) is
 // the raw read buffer; zs.next_in/avail_in the part of it not yet inflated;
 // raw_read counts the file's bytes read so far, so raw_read - zs.avail_in is
@@ -165,6 +189,13 @@ struct InputFile::Gunzip {
 };
 
 InputFile::InputFile(const std::string& path) : path_(path) {
+  // A descriptor of this process (/dev/stdin) is opened anew, so a file
+  // behind it reads from its start each time (a stream without a box is read
+  // twice); one held for writing only is refused, as reading it would fail
+  // (opening the name again would read whatever it names instead).
+  if (const int own = own_descriptor(path); own >= 0 && (::fcntl(own, F_GETFL) & O_ACCMODE) == O_WRONLY)
+    throw Error(ErrorCode::io_failure,
+                "cannot read '" + path + "': the descriptor is open for writing only (or was closed)");
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw_io_error("cannot open", path, errno);
   struct stat st;
@@ -439,27 +470,6 @@ void unlink_temporaries() noexcept {
   }
 }
 
-namespace {
-
-// The descriptor of this process that a path names (/dev/stdout, /dev/stderr,
-// /dev/fd/N, /proc/self/fd/N) when it is open; -1 for any other path.
-int own_descriptor(const std::string& path) {
-  int fd = -1;
-  if (path == "/dev/stdout") fd = 1;
-  else if (path == "/dev/stderr") fd = 2;
-  else {
-    std::string_view digits;
-    for (std::string_view prefix : {"/dev/fd/", "/proc/self/fd/"})
-      if (path.rfind(prefix, 0) == 0) digits = std::string_view(path).substr(prefix.size());
-    // As the kernel spells them: no sign, no leading zero (/dev/fd/01 is no name).
-    if (digits.empty() || (digits[0] == '0' && digits.size() > 1)) return -1;
-    const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), fd);
-    if (ec != std::errc{} || end != digits.data() + digits.size()) return -1;
-  }
-  return ::fcntl(fd, F_GETFD) == -1 ? -1 : fd;
-}
-
-}  // namespace
 
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   // A descriptor this process holds (pdt gen --out /dev/stdout > file): its

@@ -283,6 +283,46 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK_FALSE(std::filesystem::exists(d.file("k.vtu")));
 #endif
   }
+  SECTION("a summary that cannot be written, a failed mesh write, a link to the trace: nothing put in place") {
+#ifdef PDT_TOOL_PATH
+    const std::string tool = std::string("'") + PDT_TOOL_PATH + "' ";
+    auto status_of = [](const std::string& cmd) {
+      const int status = std::system(cmd.c_str());
+      return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    };
+    const std::string err = d.file("err.txt");
+    // Standard output closed: refused at once (the next file opened would
+    // take its number, and the summary would go into an output).
+    CHECK(status_of(tool + "gen --points 10 --out '" + d.file("g.ops") + "' >&- 2>'" + err + "'") == 2);
+    CHECK(pdt_test::read_file(err).find("standard output is closed") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(d.file("g.ops")));
+    // Standard input closed, read by name: refused, not read as what took its place.
+    CHECK(status_of(tool + "run /dev/stdin <&- >/dev/null 2>'" + err + "'") == 2);
+    CHECK(pdt_test::read_file(err).find("cannot read '/dev/stdin'") != std::string::npos);
+    // A summary lost to a full device: the run fails before its outputs
+    // are put in place.
+    CHECK(status_of(tool + "refine --domain sphere --size 0.3 --out '" + d.file("f.vtu") + "' --trace '" +
+                    d.file("f.ops") + "' >/dev/full 2>'" + err + "'") == 2);
+    CHECK(pdt_test::read_file(err).find("cannot write the summary") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(d.file("f.vtu")));
+    CHECK_FALSE(std::filesystem::exists(d.file("f.ops")));
+    // The mesh's .ele passes a file-size limit the trace and .node stay
+    // under: the run fails, and the older trace is as it was.
+    pdt_test::write_file(d.file("s.ops"), "old\n");
+    CHECK(status_of("bash -c \"ulimit -f 150; " + tool + "refine --domain sphere --size 0.15 --threads 2 --out '" +
+                    d.file("s.node") + "' --trace '" + d.file("s.ops") + "' >/dev/null 2>'" + err + "'\"") == 2);
+    CHECK(pdt_test::read_file(err).find("File too large") != std::string::npos);
+    CHECK(pdt_test::read_file(d.file("s.ops")) == "old\n");
+    // --out, a link to a file not there yet that is the trace's name: one
+    // file written twice, refused before the run.
+    std::filesystem::create_symlink("t.ops", d.file("m.vtu"));
+    const Result r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + d.file("m.vtu") + "' --trace '" +
+                                    d.file("t.ops") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("give the trace a name of its own") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(d.file("t.ops")));
+#endif
+  }
   SECTION("a stream without a box, piped to the engine") {
     // The engine needs the domain first; without a box line the stream is
     // read twice, which a pipe cannot be: refused, saying what to do. With

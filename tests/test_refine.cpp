@@ -227,11 +227,20 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
                          " sample points, over the point budget of " + budget) != std::string::npos);
     CHECK(small.out.find("insertions") == std::string::npos);  // refused before anything was inserted
   }
-  // Samples that fit, but not with the starting lattice (17 points): hit at the end.
+  // Samples that fit, but not with the starting points (17): stopped before
+  // the samples go in, below the budget, saying what the step needed.
   const Result samples = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 528");
   INFO("stdout:\n" << samples.out);
   CHECK(samples.code == 1);
-  CHECK(samples.out.find("the point budget of 528 was hit") != std::string::npos);
+  CHECK(samples.out.find("the point budget of 528 stopped it: ") != std::string::npos);
+  CHECK(samples.out.find("its next step needs 512 more") != std::string::npos);
+  // Refined as far as the interior asked, the surface samples left (all at
+  // once) do not fit: stopped there, below the budget, saying so.
+  const Result rest = run_pdt(d, "refine --domain sphere --size 0.2 --threads 2 --budget 700");
+  INFO("stdout:\n" << rest.out);
+  CHECK(rest.code == 1);
+  CHECK(rest.out.find("the point budget of 700 stopped it: ") != std::string::npos);
+  CHECK(rest.out.find(" was hit") == std::string::npos);
   // A size beyond any coarser look (4 times it overflows to infinity):
   // refused as too large, at once.
   const Result huge = run_pdt(d, "refine --domain sphere --size 1e308 --threads 1");

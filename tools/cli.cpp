@@ -41,6 +41,21 @@ void require_writable_dir(const char* option, const std::string& path) {
                                                      "': " + std::strerror(err));
 }
 
+namespace {
+// What path names when it is a symbolic link to a file not there yet (where
+// the writers make the file: OutputFile), a relative link read from the
+// link's folder; "" otherwise.
+std::string dangling_link_target(const std::string& path) {
+  struct stat st;
+  if (::stat(path.c_str(), &st) == 0 || ::lstat(path.c_str(), &st) != 0 || !S_ISLNK(st.st_mode)) return "";
+  std::string link(4096, '\0');
+  const ssize_t n = ::readlink(path.c_str(), link.data(), link.size());
+  if (n <= 0) return "";
+  link.resize(static_cast<std::size_t>(n));
+  return link[0] == '/' ? link : path.substr(0, path.find_last_of('/') + 1) + link;
+}
+}  // namespace
+
 void require_writable_file(const char* option, const std::string& path) {
   struct stat st;
   if (::stat(path.c_str(), &st) == 0) {
@@ -52,16 +67,10 @@ void require_writable_file(const char* option, const std::string& path) {
     if (::access(path.c_str(), W_OK) != 0)
       throw pdt::Error(pdt::ErrorCode::io_failure,
                        std::string(option) + ": cannot write '" + path + "': " + std::strerror(errno));
-  } else if (::lstat(path.c_str(), &st) == 0 && S_ISLNK(st.st_mode)) {
+  } else if (const std::string link = dangling_link_target(path); !link.empty()) {
     // A link to a file not there yet: the file is made where the link points.
-    std::string link(4096, '\0');
-    const ssize_t n = ::readlink(path.c_str(), link.data(), link.size());
-    if (n > 0) {
-      link.resize(static_cast<std::size_t>(n));
-      if (link[0] != '/') link = path.substr(0, path.find_last_of('/') + 1) + link;
-      require_writable_dir(option, link);
-      return;
-    }
+    require_writable_dir(option, link);
+    return;
   }
   // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too (OutputFile).
   if (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) return;
@@ -106,9 +115,14 @@ bool same_file(const std::string& a, const std::string& b) {
   struct stat sa, sb;
   if (::stat(a.c_str(), &sa) == 0 && ::stat(b.c_str(), &sb) == 0)
     return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+  // Else by where they will be written: a link to a file not there yet names
+  // its target (the writers make the file there).
+  const std::string la = dangling_link_target(a), lb = dangling_link_target(b);
+  const std::string& wa = la.empty() ? a : la;
+  const std::string& wb = lb.empty() ? b : lb;
   std::error_code ea, eb;
-  const std::filesystem::path pa = std::filesystem::weakly_canonical(a, ea), pb = std::filesystem::weakly_canonical(b, eb);
-  return ea || eb ? a == b : pa == pb;
+  const std::filesystem::path pa = std::filesystem::weakly_canonical(wa, ea), pb = std::filesystem::weakly_canonical(wb, eb);
+  return ea || eb ? wa == wb : pa == pb;
 }
 
 bool Args::option(const char* name, bool takes_value) {
@@ -171,6 +185,15 @@ std::string box_string(const pdt::Box& b) {
 }
 
 std::FILE* summary_stream() { return summary_file; }
+
+void require_summary_written() {
+  errno = 0;
+  if (std::fflush(summary_file) == 0 && !std::ferror(summary_file)) return;
+  const int err = errno != 0 ? errno : EIO;
+  throw pdt::Error(pdt::ErrorCode::io_failure,
+                   std::string("cannot write the summary to standard ") + (summary_file == stderr ? "error" : "output") +
+                       ": " + std::strerror(err) + "; the output files were not written (older ones stay as they were)");
+}
 
 bool writes_standard_output(const std::string& path) {
   struct stat out, st;

@@ -66,7 +66,8 @@ void require_stream_output_name(const char* usage, const char* option, const std
 // .off, .node, .smesh); anything else is an operation stream.
 bool is_point_file(const std::string& path);
 // a and b name the same file: the same device and inode when both exist, else
-// the same path resolved as far as it exists (else compared as given).
+// the same path resolved as far as it exists, a link to a file not there yet
+// standing for its target (else compared as given).
 bool same_file(const std::string& a, const std::string& b);
 
 std::string box_string(const pdt::Box& b);
@@ -76,6 +77,10 @@ bool writes_standard_output(const std::string& path);
 // Where a command's summary goes: standard output, or standard error when an
 // output stream of the command goes to standard output.
 std::FILE* summary_stream();
+// Flushes summary_stream(); throws pdt::Error(io_failure) if what was printed
+// could not be written (a command calls it before it puts its outputs in
+// place, so that a lost summary fails the run with the files as they were).
+void require_summary_written();
 // One "key   value" line of a command's summary (on summary_stream()).
 void row(const char* key, const std::string& value);
 // " (12,345/s)", or "" when there is nothing to say.

@@ -147,7 +147,10 @@ int cmd_refine(Args args) {
   o.workers = workers;
   o.seed = seed;
   o.budget = budget;
-  o.trace = trace.value_or("");
+  // Written during the run, put in place at the end, with the mesh (a run
+  // that fails or is interrupted before leaves an older trace as it was).
+  std::optional<pdt::OpWriter> trace_writer;
+  if (trace) o.trace = &trace_writer.emplace(*trace, o.domain.box);
   const bool tty = ::isatty(STDERR_FILENO) == 1;
   if (tty)
     o.progress = [](std::uint64_t vertices, std::uint64_t queued, double s) {
@@ -157,7 +160,14 @@ int cmd_refine(Args args) {
     };
 
   pdt::Triangulation t;
-  const pdt_refine::RefineStats st = pdt_refine::refine(t, o);
+  const pdt_refine::RefineStats st = [&] {
+    try {
+      return pdt_refine::refine(t, o);
+    } catch (...) {
+      if (tty) std::fputs("\r\033[K", stderr);  // the error gets a line of its own
+      throw;
+    }
+  }();
   if (tty) std::fputs("\r\033[K", stderr);
   if (st.samples_over_budget) {
     // Nothing was refined: the surface's samples alone exceed the budget.
@@ -166,7 +176,7 @@ int cmd_refine(Args args) {
                       (st.surface_samples ? format_count(st.surface_samples) : std::string("more")) +
                       " sample points, over the point budget of " + format_count(o.budget) + " (raise --budget or --size)");
     std::fflush(summary_stream());
-    return 1;
+    return 1;  // the trace writer is discarded: an older file of its name stays
   }
   const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed);
 
@@ -182,7 +192,7 @@ int cmd_refine(Args args) {
   row("removals", format_count(st.removals) + " (vertices too close to a surface sample)");
   row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
   std::snprintf(buf, sizeof buf,
-                "%.3f radius-edge (bound %.3f), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
+                "%.3f radius-edge (bound %.4g), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
                 "protected layer along the surface)",
                 q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
                 format_count(q.protected_layer).c_str());
@@ -194,18 +204,23 @@ int cmd_refine(Args args) {
                 pdt_refine::MeshQuality::sliver_degrees, format_count(q.slivers_judged).c_str());
   row("dihedral", buf);
   int status = 0;
+  // "was hit", or, when the budget stopped a step of several points before
+  // it was reached, what that step would have needed.
+  const std::string budget_stop =
+      st.budget_step > 1
+          ? "the point budget of " + format_count(o.budget) + " stopped it: " + format_count(st.insertions) +
+                " points in, its next step needs " + format_count(st.budget_step) + " more"
+          : "the point budget of " + format_count(o.budget) + " was hit";
   if (q.violations) {
     row("bounds", format_count(q.violations) + " tets with their circumcentre inside (out of the protected layer) miss a bound" +
-                      (st.budget_hit ? " (the point budget of " + format_count(o.budget) + " was hit)" : ""));
+                      (st.budget_hit ? " (" + budget_stop + ")" : ""));
     status = 1;
   } else if (st.budget_hit) {  // an unfinished refinement: the bounds hold only on what it judged
-    row("bounds", "unfinished: the point budget of " + format_count(o.budget) +
-                      " was hit (met by the tets there are, which are not a refined mesh)");
+    row("bounds", "unfinished: " + budget_stop + " (met by the tets there are, which are not a refined mesh)");
     status = 1;
   } else {
     row("bounds", std::string("met by every tet whose circumcentre is inside, out of the protected layer"));
   }
-  row("peak memory", format_megabytes(pdt::support::peak_rss_bytes()));
   const pdt::WorkerStats w = st.engine.total();
   std::snprintf(buf, sizeof buf, "%s completed, %s rollbacks, %s steals, %s escalated, imbalance %.2f",
                 format_count(w.completed).c_str(), format_count(w.rollbacks).c_str(), format_count(w.steals).c_str(),
@@ -217,18 +232,28 @@ int cmd_refine(Args args) {
     row("validate", ok ? std::string("ok") : "FAILED: " + why);
     if (!ok) status = 1;
   }
+  // The summary so far must reach its reader before the outputs are put in
+  // place: a run whose report is lost (a full disk, a closed pipe) fails
+  // with the files as they were.
+  require_summary_written();
+  const std::uint64_t peak = pdt::support::peak_rss_bytes();  // the run's own; writing a .vtu copies the mesh
   if (out) {
     if (ends_with_nocase(*out, ".vtu")) {
       write_inside_vtu(*out, t, o.domain);
-      row("wrote", *out);
     } else {
       pdt::write_tetgen(*out, t);
-      const pdt::TetgenFiles files = pdt::tetgen_files(*out);
-      row("wrote", files.node + " and " + files.ele);
     }
+  }
+  if (trace_writer) trace_writer->close();
+  if (out) {
+    const pdt::TetgenFiles files = pdt::tetgen_files(*out);
+    row("wrote", ends_with_nocase(*out, ".vtu") ? *out : files.node + " and " + files.ele);
   }
   if (trace)
     row("trace", writes_standard_output(*trace) ? *trace : *trace + " (pdt run " + *trace + " --threads N replays it)");
+  row("peak memory", format_megabytes(peak) + (out ? ", " + format_megabytes(pdt::support::peak_rss_bytes()) +
+                                                          " with writing the mesh (a copy of it)"
+                                                    : std::string()));
   std::fflush(summary_stream());
   return status;
 }

@@ -7,7 +7,9 @@
 // `run --validate` found a broken triangulation, `refine` missed its bounds);
 // 2 usage error or any failure (bad input, I/O). Every failure is one
 // "pdt: ..." line on stderr; nothing escapes as an uncaught exception.
+#include <fcntl.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <csignal>
@@ -82,6 +84,27 @@ int dispatch(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A standard descriptor closed by the caller (pdt ... >&-) would be the
+  // next file pdt opens, and the summary or an error message would be written
+  // into an output (a trace, a mesh). Each closed one is held by /dev/null
+  // opened the other way round, so using it fails as a closed one does and no
+  // file takes its number; a closed standard output is refused at once.
+  bool stdout_closed = false;
+  for (int fd = 0; fd <= 2; ++fd)
+    if (::fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
+      stdout_closed = stdout_closed || fd == 1;
+      const int held = ::open("/dev/null", (fd == 0 ? O_WRONLY : O_RDONLY) | O_CLOEXEC);
+      if (held >= 0 && held != fd) {  // the lowest free number: fd itself, unless /dev/null was refused
+        ::dup2(held, fd);
+        ::close(held);
+      }
+    }
+  if (stdout_closed) {
+    std::fputs("pdt: standard output is closed; pdt writes its summary there (send it to /dev/null to drop it); "
+               "nothing was done\n",
+               stderr);
+    return 2;
+  }
   // A closed pipe on stdout (pdt run ... | head) is then a write error that
   // ends the run with one "pdt: ..." line and status 2, not a silent SIGPIPE.
   std::signal(SIGPIPE, SIG_IGN);

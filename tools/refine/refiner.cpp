@@ -62,16 +62,15 @@ class CellTable {
   std::unique_ptr<std::atomic<Chunk*>[]> chunks_;
 };
 
-// The stream actually carried out, as an operation stream (pdt::OpWriter:
-// text, or binary for a .opsb name; a failed run leaves no partial trace):
-// each operation is written by the change hook, inside the operation (so the
-// file's order is one in which conflicting operations happened), with
-// insertions numbered in that order and removals naming them.
+// The stream actually carried out, as an operation stream, into the caller's
+// pdt::OpWriter (text, or binary for a .opsb name): each operation is written
+// by the change hook, inside the operation (so the file's order is one in
+// which conflicting operations happened), with insertions numbered in that
+// order and removals naming them. The caller closes the writer (commits the
+// file) once its other outputs are written too.
 class Trace {
  public:
-  Trace(const std::string& path, const pdt::Box& box) {
-    if (!path.empty()) writer_.emplace(path, box);
-  }
+  explicit Trace(pdt::OpWriter* writer) : writer_(writer) {}
   void inserted(std::uint64_t incarnation, const Point3& p) {
     write([&] { index_of_[incarnation] = writer_->insert(p); });
   }
@@ -93,9 +92,6 @@ class Trace {
       index_of_.erase(it);
     });
   }
-  void close() {
-    write([&] { writer_->close(); });
-  }
 
  private:
   // Under the lock, and once a write has failed (a full disk) every later
@@ -103,7 +99,7 @@ class Trace {
   // otherwise report "closed", and the engine keeps whichever came first.
   template <class F>
   void write(F&& f) {
-    if (!writer_) return;
+    if (writer_ == nullptr) return;
     std::lock_guard lock(m_);
     if (failed_) std::rethrow_exception(failed_);
     try {
@@ -113,7 +109,7 @@ class Trace {
       throw;
     }
   }
-  std::optional<pdt::OpWriter> writer_;  // none: no trace asked for
+  pdt::OpWriter* writer_;  // null: no trace asked for
   std::mutex m_;
   std::exception_ptr failed_;
   std::unordered_map<std::uint64_t, std::uint64_t> index_of_;  // live vertex incarnation -> its insertion
@@ -297,6 +293,8 @@ class Refiner {
   // the budget was hit.
   bool within_budget(std::uint64_t n) {
     if (insertions_.load() + n <= o_.budget) return true;
+    std::uint64_t none = 0;
+    budget_step_.compare_exchange_strong(none, n);  // the first step refused
     budget_hit_.store(true);
     stop_.store(true);
     return false;
@@ -333,6 +331,7 @@ class Refiner {
     for (const Lane& l : lanes_) st.dead_skipped += l.dead.load();
     st.protected_skipped = protected_.load();
     st.budget_hit = budget_hit_.load();
+    st.budget_step = budget_step_.load();
     st.surface_samples = samples_.size();
     st.start_points = start_points_.load();
     st.samples_over_budget = samples_over_budget_.load();
@@ -383,6 +382,7 @@ class Refiner {
   std::array<Point3, 8> corners_{};
   std::atomic<int> corner_now_{-1};  // the corner being inserted, while start() runs
   std::atomic<bool> stop_{false}, budget_hit_{false}, samples_over_budget_{false};
+  std::atomic<std::uint64_t> budget_step_{0};  // RefineStats::budget_step
   std::atomic<std::uint64_t> insertions_{0}, samples_inserted_{0}, circumcentres_{0}, removals_{0},
       protected_{0}, start_points_{0};
 };
@@ -398,7 +398,16 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
   if (o.workers == 0) bad("the refiner needs at least one worker");
   const double extent = std::max({o.domain.box.hi.x - o.domain.box.lo.x, o.domain.box.hi.y - o.domain.box.lo.y,
                                   o.domain.box.hi.z - o.domain.box.lo.z});
-  if (o.size < extent * 1e-4) bad("the size bound is too small for this domain (at most 10^4 cells per axis)");
+  // At most 10^4 sizes across the box (a size of exactly extent / 10^4 passes
+  // however the division rounds).
+  if (extent / o.size > 1e4 * (1 + 1e-12)) {
+    char why[200];
+    std::snprintf(why, sizeof why,
+                  "the size bound %g is too small for the %s domain: at most 10^4 sizes fit across its box (%g "
+                  "across), so the smallest size is %g",
+                  o.size, o.domain.name.c_str(), extent, extent / 1e4);
+    bad(why);
+  }
   RefineStats st;
   st.workers = o.workers;
   const auto start = std::chrono::steady_clock::now();
@@ -408,7 +417,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
       tbb::global_control::max_allowed_parallelism,
       std::max<std::size_t>(threads + 1, tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
   tbb::task_arena arena(static_cast<int>(threads), 0);
-  Trace trace(o.trace, o.domain.box);
+  Trace trace(o.trace);
   // The surface samples, unless they alone exceed the budget: each kept
   // sample stands for a few crossed cells (those whose projected centres
   // fall within spacing / 2 of it: about 1.5, never near 8), so past 8 per
@@ -445,7 +454,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
                   o.size, o.domain.name.c_str(), extent);
     bad(why);
   }
-  if (too_many) {  // refused: the trace is discarded (an older file of its name stays)
+  if (too_many) {  // refused before anything ran: nothing written to the trace
     st.budget_hit = st.samples_over_budget = true;
     st.seconds = seconds();
     return st;
@@ -495,7 +504,6 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
     r.fill(st);
     st.engine = e.stats();
   }
-  if (!st.samples_over_budget) trace.close();  // refused before anything ran: discarded
   st.seconds = seconds();
   return st;
 }

@@ -45,7 +45,11 @@ struct RefineOptions {
   unsigned workers = 1;     // the engine's workers (and the arena's threads, at most the cores)
   std::uint64_t seed = 1;   // which surface samples are kept
   std::uint64_t budget = 20000000;  // most points inserted
-  std::string trace;        // an .ops file to write the operations carried out to ("" = none)
+  // Where the operations carried out are written (null: nowhere). refine()
+  // writes them but does not close the writer: the caller does (which puts
+  // the file in place) once its other outputs are written too, so a run that
+  // fails or is interrupted before then leaves an older file as it was.
+  pdt::OpWriter* trace = nullptr;
   // Called now and then (from the calling thread) while it runs.
   std::function<void(std::uint64_t vertices, std::uint64_t queued, double seconds)> progress;
 };
@@ -62,6 +66,11 @@ struct RefineStats {
   std::uint64_t surface_samples = 0;  // samples available
   std::uint64_t start_points = 0;     // the box's corners and the starting lattice
   bool budget_hit = false;
+  // When the budget stopped it before a step of several points (the starting
+  // lattice, or the surface samples still to go in, each all at once) rather
+  // than at the budget itself: that step's points, which would have passed
+  // it; else 0.
+  std::uint64_t budget_step = 0;
   // The surface's samples alone exceed the budget: nothing was refined
   // (surface_samples: their number, or 0 when the sampling stopped early).
   bool samples_over_budget = false;

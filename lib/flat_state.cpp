@@ -32,7 +32,9 @@ InsertResult Triangulation::Impl::insert_flat(OpContext& ctx, const KPoint& p) {
   if (!raises_to_3d) {
     // Room first: after alloc_vertex nothing may fail.
     PDT_FAULT_POINT("flat list");
-    flat.reserve(flat.size() + 1);
+    // Growing geometrically: reserve(size() + 1) would reallocate and copy
+    // the whole list for every insertion (1M coplanar points: hours).
+    if (flat.size() == flat.capacity()) flat.reserve(std::max<std::size_t>(16, 2 * flat.capacity()));
     flat_index.reserve(flat.size() + 1, verts);
     begin_report(ctx, 0, 0);
   }

@@ -191,11 +191,14 @@ struct InputFile::Gunzip {
 InputFile::InputFile(const std::string& path) : path_(path) {
   // A descriptor of this process (/dev/stdin) is opened anew, so a file
   // behind it reads from its start each time (a stream without a box is read
-  // twice); one held for writing only is refused, as reading it would fail
-  // (opening the name again would read whatever it names instead).
-  if (const int own = own_descriptor(path); own >= 0 && (::fcntl(own, F_GETFL) & O_ACCMODE) == O_WRONLY)
-    throw Error(ErrorCode::io_failure,
-                "cannot read '" + path + "': the descriptor is open for writing only (or was closed)");
+  // twice); one that cannot be read (open for writing only, or a bare O_PATH
+  // place holder) is refused, as reading it would fail (opening the name
+  // again would read whatever it names instead).
+  if (const int own = own_descriptor(path); own >= 0) {
+    const int flags = ::fcntl(own, F_GETFL);
+    if ((flags & O_ACCMODE) == O_WRONLY || (flags & O_PATH) != 0)
+      throw Error(ErrorCode::io_failure, "cannot read '" + path + "': the descriptor is not open for reading");
+  }
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw_io_error("cannot open", path, errno);
   struct stat st;
@@ -481,8 +484,8 @@ OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
     // Refused now, before anything is written, as opening the name would be.
     struct stat st;
     if (::fstat(own, &st) == 0 && S_ISDIR(st.st_mode)) throw_io_error("cannot write", path, EISDIR);
-    if ((::fcntl(own, F_GETFL) & O_ACCMODE) == O_RDONLY)
-      throw Error(ErrorCode::io_failure, "cannot write '" + path + "': the descriptor is open for reading only");
+    if (const int flags = ::fcntl(own, F_GETFL); (flags & O_ACCMODE) == O_RDONLY || (flags & O_PATH) != 0)
+      throw Error(ErrorCode::io_failure, "cannot write '" + path + "': the descriptor is not open for writing");
     fd_ = ::fcntl(own, F_DUPFD_CLOEXEC, 0);
     if (fd_ < 0) throw_io_error("cannot open", path, errno);
     direct_ = true;

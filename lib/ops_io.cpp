@@ -393,12 +393,21 @@ struct OpWriter::State {
   LiveSet live;  // insertion k of the stream is the k-th written
   std::uint64_t written = 0;
   std::string line;
+  bool finished = false;  // finish() ran: everything is in the temporary, only close() is left
 
   detail::OutputFile& open(const char* call) {
     if (!out)
       throw Error(ErrorCode::invalid_argument,
                   std::string("OpWriter::") + call + ": '" + path + "' is closed (or a write to it failed)");
     return *out;
+  }
+  // open(), for a call that writes: refused after finish().
+  detail::OutputFile& open_to_write(const char* call) {
+    detail::OutputFile& o = open(call);
+    if (finished)
+      throw Error(ErrorCode::invalid_argument, std::string("OpWriter::") + call + ": '" + path +
+                                                   "' is finished (finish() was called): only close() is left");
+    return o;
   }
   // A write error discards the file (OutputFile did): the writer is closed.
   template <class F>
@@ -453,7 +462,7 @@ OpWriter& OpWriter::operator=(OpWriter&&) noexcept = default;
 
 void OpWriter::write(const Operation& op) {
   State& st = state_of(state_);
-  detail::OutputFile& out = st.open("write");
+  detail::OutputFile& out = st.open_to_write("write");
   if (op.kind == Operation::Kind::insert) {
     if (!is_finite(op.point))
       throw Error(ErrorCode::invalid_argument, "OpWriter: insertion of a point with a NaN or infinite coordinate");
@@ -497,17 +506,25 @@ std::uint64_t OpWriter::operations_written() const { return state_of(state_).wri
 std::uint64_t OpWriter::insertions_written() const { return state_of(state_).live.made(); }
 const std::string& OpWriter::path() const { return state_of(state_).path; }
 
-void OpWriter::close() {
+void OpWriter::finish() {
   State& st = state_of(state_);
-  detail::OutputFile& out = st.open("close");
+  detail::OutputFile& out = st.open_to_write("finish");
   st.guarded([&] {
     if (st.binary) {
       unsigned char count[8];
       store_u64(count, st.written);
       out.overwrite(kCountOffset, count, sizeof count);
     }
-    out.commit();
+    out.finish();
   });
+  st.finished = true;
+}
+
+void OpWriter::close() {
+  State& st = state_of(state_);
+  detail::OutputFile& out = st.open("close");
+  if (!st.finished) finish();
+  st.guarded([&] { out.commit(); });
   st.out.reset();
 }
 

@@ -197,7 +197,7 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     const int status = std::system(read_only.c_str());
     CHECK(WIFEXITED(status));
     CHECK(WEXITSTATUS(status) == 2);
-    CHECK(pdt_test::read_file(d.file("ro_err.txt")).find("open for reading only") != std::string::npos);
+    CHECK(pdt_test::read_file(d.file("ro_err.txt")).find("not open for writing") != std::string::npos);
     CHECK(pdt_test::read_file(ro) == "keep\n");
 #endif
   }
@@ -316,11 +316,20 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     // --out, a link to a file not there yet that is the trace's name: one
     // file written twice, refused before the run.
     std::filesystem::create_symlink("t.ops", d.file("m.vtu"));
-    const Result r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + d.file("m.vtu") + "' --trace '" +
-                                    d.file("t.ops") + "'");
+    Result r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + d.file("m.vtu") + "' --trace '" +
+                              d.file("t.ops") + "'");
     CHECK(r.code == 2);
     CHECK(r.err.find("give the trace a name of its own") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(d.file("t.ops")));
+    // The same through a chain of two links.
+    std::filesystem::create_symlink("l2", d.file("c.vtu"));
+    std::filesystem::create_symlink("t.ops", d.file("l2"));
+    r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + d.file("c.vtu") + "' --trace '" + d.file("t.ops") + "'");
+    CHECK(r.code == 2);
+    CHECK(r.err.find("give the trace a name of its own") != std::string::npos);
+    // Standard error closed, read by name: refused too (its place is held by
+    // a descriptor that can be neither read nor written).
+    CHECK(status_of(tool + "run /dev/stderr 2>&- >/dev/null") == 2);
 #endif
   }
   SECTION("a stream without a box, piped to the engine") {

@@ -513,6 +513,37 @@ TEST_CASE("OpWriter writes a stream one operation at a time, text and binary, bi
   }
 }
 
+TEST_CASE("OpWriter::finish writes everything out without putting the file in place; close then renames", "[io]") {
+  TempDir d;
+  for (const char* name : {"f.ops", "f.opsb"}) {
+    INFO(name);
+    const std::string path = d.file(name);
+    write_file(path, "older\n");
+    pdt::OpWriter w(path, pdt::Box{{0, 0, 0}, {1, 1, 1}});
+    const std::uint64_t k = w.insert({0.5, 0.5, 0.5});
+    w.insert({0.25, 0.5, 0.5});
+    w.remove(k);
+    w.finish();
+    CHECK(pdt_test::read_file(path) == "older\n");  // not in place yet
+    auto e = catch_error([&] { w.insert({0.1, 0.1, 0.1}); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("finish() was called") != std::string::npos);
+    CHECK(catch_error([&] { w.finish(); }).has_value());  // a second finish is refused too
+    w.close();
+    const pdt::OpStream s = pdt::read_ops(path);
+    CHECK(s.ops.size() == 3);  // the binary count was patched by finish()
+    CHECK(s.insert_count() == 2);
+  }
+  // A writer finished and dropped without close(): nothing is put in place.
+  {
+    pdt::OpWriter w(d.file("dropped.ops"));
+    w.insert({1, 2, 3});
+    w.finish();
+  }
+  CHECK_FALSE(std::filesystem::exists(d.file("dropped.ops")));
+}
+
 TEST_CASE("OpWriter refuses what read_ops would reject and writes nothing for it", "[io]") {
   TempDir d;
   const std::string p = d.file("w.ops");

@@ -42,17 +42,24 @@ void require_writable_dir(const char* option, const std::string& path) {
 }
 
 namespace {
-// What path names when it is a symbolic link to a file not there yet (where
-// the writers make the file: OutputFile), a relative link read from the
-// link's folder; "" otherwise.
+// What path names when it is a symbolic link to a file not there yet,
+// through a chain of such links (where the writers make the file:
+// OutputFile), each relative link read from its own folder; "" otherwise (a
+// chain that loops or runs past 40 links too: opening it fails anyway).
 std::string dangling_link_target(const std::string& path) {
   struct stat st;
-  if (::stat(path.c_str(), &st) == 0 || ::lstat(path.c_str(), &st) != 0 || !S_ISLNK(st.st_mode)) return "";
-  std::string link(4096, '\0');
-  const ssize_t n = ::readlink(path.c_str(), link.data(), link.size());
-  if (n <= 0) return "";
-  link.resize(static_cast<std::size_t>(n));
-  return link[0] == '/' ? link : path.substr(0, path.find_last_of('/') + 1) + link;
+  if (::stat(path.c_str(), &st) == 0) return "";
+  std::string at = path;
+  for (int hop = 0; hop < 40; ++hop) {
+    if (::lstat(at.c_str(), &st) != 0) return hop == 0 ? "" : at;  // the missing file at the chain's end
+    if (!S_ISLNK(st.st_mode)) return "";
+    std::string link(4096, '\0');
+    const ssize_t n = ::readlink(at.c_str(), link.data(), link.size());
+    if (n <= 0) return "";
+    link.resize(static_cast<std::size_t>(n));
+    at = link[0] == '/' ? link : at.substr(0, at.find_last_of('/') + 1) + link;
+  }
+  return "";
 }
 }  // namespace
 

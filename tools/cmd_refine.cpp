@@ -237,6 +237,9 @@ int cmd_refine(Args args) {
   // with the files as they were.
   require_summary_written();
   const std::uint64_t peak = pdt::support::peak_rss_bytes();  // the run's own; writing a .vtu copies the mesh
+  // The trace written out and checked before the mesh is put in place, so
+  // that what is left for it (a rename) can hardly fail after the mesh's.
+  if (trace_writer) trace_writer->finish();
   if (out) {
     if (ends_with_nocase(*out, ".vtu")) {
       write_inside_vtu(*out, t, o.domain);

@@ -86,14 +86,15 @@ int dispatch(int argc, char** argv) {
 int main(int argc, char** argv) {
   // A standard descriptor closed by the caller (pdt ... >&-) would be the
   // next file pdt opens, and the summary or an error message would be written
-  // into an output (a trace, a mesh). Each closed one is held by /dev/null
-  // opened the other way round, so using it fails as a closed one does and no
-  // file takes its number; a closed standard output is refused at once.
+  // into an output (a trace, a mesh). Each closed one is held by a descriptor
+  // that can be neither read nor written (O_PATH), so using it fails as a
+  // closed one does (by name too: /dev/stdin is refused) and no file takes its
+  // number; a closed standard output is refused at once.
   bool stdout_closed = false;
   for (int fd = 0; fd <= 2; ++fd)
     if (::fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
       stdout_closed = stdout_closed || fd == 1;
-      const int held = ::open("/dev/null", (fd == 0 ? O_WRONLY : O_RDONLY) | O_CLOEXEC);
+      const int held = ::open("/dev/null", O_PATH | O_CLOEXEC);
       if (held >= 0 && held != fd) {  // the lowest free number: fd itself, unless /dev/null was refused
         ::dup2(held, fd);
         ::close(held);

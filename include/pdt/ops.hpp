@@ -112,9 +112,15 @@ class OpWriter {
   void write(const Operation& op);
   std::uint64_t operations_written() const;
   std::uint64_t insertions_written() const;
-  // Flushes, patches the count (binary), checks, renames onto the path.
-  // After close() (or a failed one) every call but the destructor is
-  // refused with invalid_argument.
+  // Writes out what is buffered, patches the count (binary) and closes the
+  // temporary file, checked, without putting it in place: what can fail is
+  // done, and close() only renames. For a program with several outputs that
+  // should all appear or none (a trace and a mesh): finish() each, then put
+  // them in place. Writing after it is refused with invalid_argument.
+  void finish();
+  // finish() if not done, then renames onto the path. After close() (or a
+  // failed one) every call but the destructor is refused with
+  // invalid_argument.
   void close();
   const std::string& path() const;
 

@@ -145,7 +145,7 @@ bool EngineState::run_global(Worker& w, OpRecord* opp, bool escalated) {
     r.error = std::current_exception();
   }
   try {
-    ensure_grid();
+    ensure_grid(true);
   } catch (const std::bad_alloc&) {
     // No new grid: walks start from the old one (or from vertices).
   }

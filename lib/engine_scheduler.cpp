@@ -511,12 +511,12 @@ bool EngineState::idle_everywhere() const { return in_flight() == 0; }
 // ---------------------------------------------------------------------------
 // The jump grid's growth, with the world stopped
 // ---------------------------------------------------------------------------
-void EngineState::ensure_grid() {
+void EngineState::ensure_grid(bool parallel) {
   if (impl.dim.load() < 3) return;  // no grid below dimension 3
   const std::size_t ids = impl.verts.size();
   if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) return;
   // Over the live vertices' bounding box, about two vertices per slot.
-  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)));
+  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)), parallel);
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
 }
 
@@ -528,7 +528,7 @@ void EngineState::maybe_grow_grid(Worker& w) {
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too
   try {
-    ensure_grid();
+    ensure_grid(true);  // on this worker's thread and the suspended workers' (their threads are free)
   } catch (const std::bad_alloc&) {
     // The old grid stays (it was built aside); walks are longer, nothing is wrong.
     grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);

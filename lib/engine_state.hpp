@@ -327,7 +327,9 @@ struct EngineState {
   void publish_batch_done(Worker& w);
 
   // -- the jump grid's growth, with the world stopped ---------------------------------
-  void ensure_grid();  // with the world stopped (or before workers run)
+  // With the world stopped (parallel: in the arena, whose other workers are
+  // suspended), or before workers run.
+  void ensure_grid(bool parallel = false);
   void maybe_grow_grid(Worker& w);
 };
 

@@ -4,7 +4,8 @@
 // duplicate: open addressing on a hash of the point's bits, linear probing,
 // deletion by backward shift (no tombstones).
 //
-// Invariant: slots_.size() is 0 or a power of two at least twice count_;
+// Invariant: slots_.size() is 0 or a power of two at least twice count_
+// (once reserve() was called for count_);
 // every vertex is reachable from its home slot without crossing an empty one.
 // reserve() is the only call that allocates, so a caller that reserves first
 // can insert and erase without failing.
@@ -55,11 +56,21 @@ class FlatIndex {
     erase_by_backward_shift(slots_, s, no_vertex, [&](VertexId w) { return home(verts[w].p); });
     --count_;
   }
+  // Empties it in time proportional to what it holds, not to the largest it
+  // ever was: a removal's scratch triangulation clears it for every removal,
+  // and after one removal with a large coplanar link each later one paid for
+  // that link's table. A large table is given back (reserve() makes the next).
   void clear() {
-    slots_.assign(slots_.size(), no_vertex);
+    if (count_ == 0) return;  // every slot is empty already
+    if (slots_.size() > 1024) {
+      std::vector<VertexId>().swap(slots_);
+    } else {
+      slots_.assign(slots_.size(), no_vertex);
+    }
     count_ = 0;
   }
   std::size_t size() const { return count_; }
+  std::size_t table_size() const { return slots_.size(); }
 
  private:
   std::size_t mask() const { return slots_.size() - 1; }

@@ -7,6 +7,11 @@
 #include <cstdlib>
 #include <vector>
 
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/parallel_for.h>
+#include <oneapi/tbb/parallel_reduce.h>
+#include <oneapi/tbb/task_arena.h>
+
 namespace pdt::detail {
 
 namespace {
@@ -67,7 +72,7 @@ VertexId JumpGrid::lookup(const KPoint& p) const {
   return no_vertex;
 }
 
-JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, bool follow_vertices) {
+JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {
   BoundingBox box;
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
@@ -118,12 +123,8 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
       return std::clamp(std::round(std::cbrt(static_cast<double>(c) / (8 * per_slot))), 2.0, 1024.0);
     };
     JumpGrid g;
-    // Not following the vertices: the root is the only node, a leaf of about
-    // `want` equal slots.
-    const bool root_leaf = !follow_vertices || is_leaf(n, 0);
-    g.lattice = BoxLattice(box.lo, box.hi,
-                           !follow_vertices ? std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want))))
-                                            : static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
+    const bool root_leaf = is_leaf(n, 0);
+    g.lattice = BoxLattice(box.lo, box.hi, static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
     // Breadth first, so that a node's children are consecutive; queue[i]
     // describes node i.
     nodes.clear(false);
@@ -208,6 +209,84 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
 #endif
     return g;
   }
+}
+
+JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
+  const std::size_t bound = verts.size();
+  struct Extent {
+    BoundingBox box;
+    std::size_t n = 0;
+  };
+  // Over ids [begin, end): what a pass adds up, and the slot each live vertex marks.
+  auto extent_of = [&](std::size_t begin, std::size_t end) {
+    Extent e;
+    for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
+      if (verts[v].multiplicity == 0) continue;
+      ++e.n;
+      const KPoint& p = verts[v].p;
+      e.box.add(p.x(), p.y(), p.z());
+    }
+    return e;
+  };
+  auto join = [](Extent a, const Extent& b) {
+    a.n += b.n;
+    for (int i = 0; i < 3; ++i) {
+      a.box.lo[i] = std::min(a.box.lo[i], b.box.lo[i]);
+      a.box.hi[i] = std::max(a.box.hi[i], b.box.hi[i]);
+    }
+    return a;
+  };
+  // Runs body(begin, end) over [0, count) in pieces, in parallel or not.
+  auto for_pieces = [&](std::size_t count, auto&& body) {
+    if (parallel)
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14),
+                        [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+    else
+      body(std::size_t{0}, count);
+  };
+  JumpGrid g;
+  auto run = [&] {
+    const Extent e = parallel ? tbb::parallel_reduce(
+                                    tbb::blocked_range<std::size_t>(0, bound, 1 << 14), Extent{},
+                                    [&](const tbb::blocked_range<std::size_t>& r, Extent acc) {
+                                      return join(acc, extent_of(r.begin(), r.end()));
+                                    },
+                                    join)
+                              : extent_of(0, bound);
+    const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
+    g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
+    const auto k = static_cast<std::uint32_t>(g.lattice.res);
+    g.node_count = 1;
+    g.nodes = std::make_unique<Node[]>(1);
+    g.nodes[0] = {0, k | leaf_bit};
+    g.slot_count = std::size_t{k} * k * k;
+    g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
+    for_pieces(g.slot_count, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
+    });
+    // Each slot keeps its largest id: one thread going up the ids stores
+    // each; pieces in parallel keep the larger, whichever comes first.
+    for_pieces(bound, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
+        if (verts[v].multiplicity == 0) continue;
+        std::atomic<VertexId>& slot = g.slots[g.slot_of(verts[v].p)];
+        if (!parallel) {
+          slot.store(static_cast<VertexId>(v), std::memory_order_relaxed);
+          continue;
+        }
+        VertexId now = slot.load(std::memory_order_relaxed);
+        while ((now == no_vertex || now < v) &&
+               !slot.compare_exchange_weak(now, static_cast<VertexId>(v), std::memory_order_relaxed)) {
+        }
+      }
+    });
+    g.built_for = e.n;
+  };
+  if (parallel)
+    tbb::this_task_arena::isolate(run);
+  else
+    run();
+  return g;
 }
 
 }  // namespace pdt::detail

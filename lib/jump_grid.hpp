@@ -114,11 +114,16 @@ struct JumpGrid {
   // slots when given (and about that many when the vertices are spread
   // evenly), else about 2 vertices per slot. Counts the vertices itself (the
   // triangulation's totals lag while engine workers hold deltas).
-  // follow_vertices = false builds one level of equal slots: for the engine,
-  // whose workers fill the domain block by block, so that the vertices at a
-  // rebuild say little about where the next ones go (a tree shaped by them
-  // made 2-worker walks 12% longer on uniform points).
-  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0, bool follow_vertices = true);
+  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0);
+  // One level of equal slots over the same box, as many as fit in `slots`
+  // (about n / 2 when 0): for the engine, whose workers fill the domain
+  // block by block, so that the vertices at a rebuild say little about where
+  // the next ones go (a tree shaped by them made 2-worker walks 12% longer on
+  // uniform points). A slot names the largest id of its vertices, as build's
+  // would. parallel: in the current TBB arena, isolated (the engine builds it
+  // with the world stopped, its other workers suspended and their threads
+  // free); the same grid either way.
+  static JumpGrid build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel);
   // Bytes it holds.
   std::size_t bytes() const { return slot_count * sizeof(VertexId) + node_count * sizeof(Node); }
 

@@ -291,11 +291,12 @@ OpStatus Triangulation::Impl::find_cell(OpContext& ctx, CellHandle h, bool* aliv
   return OpStatus::done;
 }
 
-void Triangulation::Impl::grid_rebuild(std::size_t slots) {
+void Triangulation::Impl::grid_rebuild(std::size_t slots, bool parallel) {
   // Built aside and moved in: an allocation failure leaves the old grid. A
   // tree that follows the vertices for the kernel; equal slots for an
   // engine, whose vertices at a rebuild are those of the blocks done so far.
-  grid = detail::JumpGrid::build(verts, slots, grid_growth == GridGrowth::kernel);
+  grid = grid_growth == GridGrowth::kernel ? detail::JumpGrid::build(verts, slots)
+                                           : detail::JumpGrid::build_equal(verts, slots, parallel);
 }
 
 }  // namespace pdt

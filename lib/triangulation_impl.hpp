@@ -293,7 +293,8 @@ struct Triangulation::Impl {
   // cell: beyond its hull facet, or on its plane inside its circumcircle)?
   bool in_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const;
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
-  void grid_rebuild(std::size_t slots = 0);
+  // parallel: an engine's equal slots, built in the current TBB arena (with the world stopped).
+  void grid_rebuild(std::size_t slots = 0, bool parallel = false);
 
   // Read-only queries in a context (its locks, its scratch). A locking
   // context takes shared locks and reports rollback on a conflict (holding

@@ -168,7 +168,11 @@ class Triangulation {
   Point3 point(VertexId v) const;                // precondition: is_vertex(v)
   std::uint32_t multiplicity(VertexId v) const;  // 0 if not a vertex
   LocateResult locate(const Point3& p, Hint hint = {}) const;
-  VertexId nearest_vertex(const Point3& p) const;  // no_vertex if empty
+  // The vertex nearest to p; no_vertex if empty. In dimension 3 a walk and a
+  // search of the neighbourhood; below it (coplanar or collinear points)
+  // every vertex is compared, in time proportional to their number (and an
+  // engine runs it with its other workers stopped).
+  VertexId nearest_vertex(const Point3& p) const;
   // Finite tetrahedra as vertex ids, positively oriented.
   std::vector<std::array<VertexId, 4>> finite_cells() const;
   // Live finite vertex ids, increasing.

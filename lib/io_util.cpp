@@ -473,7 +473,6 @@ void unlink_temporaries() noexcept {
   }
 }
 
-
 OutputFile::OutputFile(const std::string& path) : path_(path), target_(path) {
   // A descriptor this process holds (pdt gen --out /dev/stdout > file): its
   // copy writes where the descriptor stands, as the shell set it up (> has

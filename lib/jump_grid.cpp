@@ -8,9 +8,10 @@
 #include <vector>
 
 #include <oneapi/tbb/blocked_range.h>
-#include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/parallel_reduce.h>
 #include <oneapi/tbb/task_arena.h>
+
+#include "for_range.hpp"
 
 namespace pdt::detail {
 
@@ -236,14 +237,6 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
     }
     return a;
   };
-  // Runs body(begin, end) over [0, count) in pieces, in parallel or not.
-  auto for_pieces = [&](std::size_t count, auto&& body) {
-    if (parallel)
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 1 << 14),
-                        [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
-    else
-      body(std::size_t{0}, count);
-  };
   JumpGrid g;
   auto run = [&] {
     const Extent e = parallel ? tbb::parallel_reduce(
@@ -261,12 +254,12 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
     g.nodes[0] = {0, k | leaf_bit};
     g.slot_count = std::size_t{k} * k * k;
     g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
-    for_pieces(g.slot_count, [&](std::size_t begin, std::size_t end) {
+    for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
       for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
     });
     // Each slot keeps its largest id: one thread going up the ids stores
     // each; pieces in parallel keep the larger, whichever comes first.
-    for_pieces(bound, [&](std::size_t begin, std::size_t end) {
+    for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
         if (verts[v].multiplicity == 0) continue;
         std::atomic<VertexId>& slot = g.slots[g.slot_of(verts[v].p)];

@@ -20,6 +20,7 @@
 #include <utility>
 
 #include "box_lattice.hpp"
+#include "for_range.hpp"
 #include "mix64.hpp"
 
 namespace pdt::detail {
@@ -211,15 +212,6 @@ struct MappedScratch {
   MappedScratch(const MappedScratch&) = delete;
   MappedScratch& operator=(const MappedScratch&) = delete;
 };
-
-template <class Body>
-void for_range(std::size_t n, bool parallel, const Body& body) {
-  if (parallel)
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14),
-                      [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
-  else
-    body(0, n);
-}
 
 }  // namespace
 

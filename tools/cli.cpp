@@ -193,6 +193,12 @@ std::string box_string(const pdt::Box& b) {
 
 std::FILE* summary_stream() { return summary_file; }
 
+void peak_memory_row(std::uint64_t run_peak, const char* then) {
+  row("peak memory", pdt::support::format_megabytes(run_peak) +
+                         (then ? ", " + pdt::support::format_megabytes(pdt::support::peak_rss_bytes()) + then
+                               : std::string()));
+}
+
 void require_summary_written() {
   errno = 0;
   if (std::fflush(summary_file) == 0 && !std::ferror(summary_file)) return;

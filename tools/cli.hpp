@@ -83,6 +83,10 @@ std::FILE* summary_stream();
 void require_summary_written();
 // One "key   value" line of a command's summary (on summary_stream()).
 void row(const char* key, const std::string& value);
+// The "peak memory" row: the run's own peak (taken before its outputs were
+// written), then, when `then` names what came after (" with writing the
+// mesh"), the process's peak now.
+void peak_memory_row(std::uint64_t run_peak, const char* then);
 // " (12,345/s)", or "" when there is nothing to say.
 std::string per_second(std::uint64_t n, double s);
 

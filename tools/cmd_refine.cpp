@@ -254,9 +254,7 @@ int cmd_refine(Args args) {
   }
   if (trace)
     row("trace", writes_standard_output(*trace) ? *trace : *trace + " (pdt run " + *trace + " --threads N replays it)");
-  row("peak memory", format_megabytes(peak) + (out ? ", " + format_megabytes(pdt::support::peak_rss_bytes()) +
-                                                          " with writing the mesh"
-                                                    : std::string()));
+  peak_memory_row(peak, out ? " with writing the mesh" : nullptr);
   std::fflush(summary_stream());
   return status;
 }

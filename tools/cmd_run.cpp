@@ -497,10 +497,7 @@ int cmd_run(Args args) {
     }
     row("wrote", written + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
   }
-  row("peak memory", format_megabytes(peak) + (out_kind != OutKind::none
-                                                    ? ", " + format_megabytes(pdt::support::peak_rss_bytes()) +
-                                                          " with writing the mesh (a copy of it)"
-                                                    : std::string()));
+  peak_memory_row(peak, out_kind != OutKind::none ? " with writing the mesh (a copy of it)" : nullptr);
   if (t.number_of_vertices()) {
     char buf[160];
     std::snprintf(buf, sizeof buf, "%.0f (peak memory / live vertices); the mesh itself: %.0f",

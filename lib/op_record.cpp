@@ -1,7 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "op_record.hpp"
 
+#include <sys/mman.h>
+
+#include <cstdint>
 #include <functional>
+#include <new>
 #include <thread>
 
 #include "fault_injection.hpp"
@@ -15,6 +19,28 @@ unsigned OpRecordPool::my_shard() {
   thread_local const unsigned shard =
       static_cast<unsigned>(std::hash<std::thread::id>()(std::this_thread::get_id()) % shards);
   return shard;
+}
+
+void OpRecordPool::SlabDeleter::operator()(OpRecord* records) const noexcept {
+  for (std::size_t i = 0; i < count; ++i) records[i].~OpRecord();
+  ::operator delete(static_cast<void*>(records), std::align_val_t{alignof(OpRecord)});
+}
+
+// The slab's pages are committed in one system call before its records are
+// constructed: a submitter that outruns the workers (a million insertions
+// submitted at once) would otherwise take a page fault every 22 records.
+OpRecordPool::Slab OpRecordPool::make_slab(std::size_t count) {
+  const std::size_t bytes = count * sizeof(OpRecord);
+  void* raw = ::operator new(bytes, std::align_val_t{alignof(OpRecord)});
+#ifdef MADV_POPULATE_WRITE
+  constexpr std::uintptr_t page = 4096;
+  const auto begin = (reinterpret_cast<std::uintptr_t>(raw) + page - 1) & ~(page - 1);
+  const auto end = (reinterpret_cast<std::uintptr_t>(raw) + bytes) & ~(page - 1);
+  if (begin < end) ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_POPULATE_WRITE);  // advice only
+#endif
+  auto* records = static_cast<OpRecord*>(raw);
+  for (std::size_t i = 0; i < count; ++i) new (&records[i]) OpRecord();  // noexcept
+  return Slab(records, SlabDeleter{count});
 }
 
 OpRecord* OpRecordPool::acquire() {
@@ -37,9 +63,13 @@ OpRecord* OpRecordPool::acquire() {
     if (OpRecord* op = take(found_last)) return op;
   for (unsigned k = 0; k < shards; ++k)
     if (OpRecord* op = take((home + k) % shards)) return op;
-  constexpr std::size_t slab = 1024;
   PDT_FAULT_POINT("op record slab");
-  auto fresh = std::make_unique<OpRecord[]>(slab);
+  std::size_t slab;
+  {
+    std::lock_guard lock(slab_mutex_);
+    slab = slabs_.size() < 4 ? 256 : slabs_.size() < 8 ? 1024 : 8192;  // a small engine stays small
+  }
+  Slab fresh = make_slab(slab);
   OpRecord* first = fresh.get();
   {
     std::lock_guard lock(slab_mutex_);

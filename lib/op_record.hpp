@@ -56,7 +56,8 @@ struct OpRecord {
   std::uint32_t ticket_slot = 0;
 };
 
-// Records come in slabs and are recycled through free lists, one per shard
+// Records come in slabs (256 records at first, 8192 once the engine has
+// needed more than 5k at once) and are recycled through free lists, one per shard
 // (a thread uses the shard its id hashes to), each under its own mutex.
 // Invariant: every record is either on a free list or owned by exactly one
 // submitted operation.
@@ -77,9 +78,15 @@ class OpRecordPool {
     OpRecord* head = nullptr;
   };
   static unsigned my_shard();
+  struct SlabDeleter {
+    std::size_t count = 0;
+    void operator()(OpRecord* records) const noexcept;
+  };
+  using Slab = std::unique_ptr<OpRecord[], SlabDeleter>;
+  static Slab make_slab(std::size_t count);  // throws std::bad_alloc
   Shard shards_[shards];
   std::mutex slab_mutex_;
-  std::vector<std::unique_ptr<OpRecord[]>> slabs_;
+  std::vector<Slab> slabs_;
 };
 
 }  // namespace pdt::detail

@@ -190,11 +190,16 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
   std::size_t first;
   for (;;) {
     PDT_FAULT_POINT("cell chunk");
-    first = cells.grow(size);
+    // Committed before the records are first written: constructing them
+    // first would take a fault per page, and populate would find nothing left.
+    first = cells.grow(size, false);
     tags.ensure_size(first + size);
     cells.populate(first, first + size);
     tags.populate(first, first + size);  // renew() reads a tag before writing it
-    for (std::size_t i = first; i < first + size; ++i) cells[i].v[0] = no_vertex;  // not live yet
+    for (std::size_t i = first; i < first + size; ++i) {
+      new (&cells[i]) CellRec();
+      cells[i].v[0] = no_vertex;  // not live yet
+    }
     // Ids past clear() keep their incarnations: one may be at the last.
     bool any_retired = false;
     if (some_at_last_incarnation.load(std::memory_order_relaxed))

@@ -130,8 +130,11 @@ struct alignas(64) Worker {
 
   unsigned index;
   std::unique_ptr<OpContext> ctx;
-  std::atomic<WorkerPhase> phase{WorkerPhase::idle};
-  std::coroutine_handle<> handle;
+  // Read by every submission to this worker's blocks (enqueue): on a line of
+  // its own, so that those reads do not take from the worker the line it
+  // writes per operation (its contention manager), nor it theirs.
+  alignas(64) std::atomic<WorkerPhase> phase{WorkerPhase::idle};
+  alignas(64) std::coroutine_handle<> handle;
   ContentionManager contention;  // owned by the worker's running task
   // Home blocks are served in a sweep along the curve: the scan starts at the
   // block served last (home_cursor, relative to the home's first block), so
@@ -198,6 +201,15 @@ inline std::int64_t steady_ns() {
   const std::int64_t ns =
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
   return ns > 0 ? ns : 1;
+}
+
+// A spin-wait hint to the processor (a waiting loop that is no system call).
+inline void cpu_pause() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#elif defined(__aarch64__)
+  asm volatile("yield");
+#endif
 }
 
 struct EngineState {
@@ -297,6 +309,10 @@ struct EngineState {
   bool may_serve(const Worker& w, const Block& b) const;
   Block* claim(Worker& w);       // a non-empty block w may serve, claimed; or null
   bool work_for(const Worker& w) const;  // is there a block w may claim?
+  // Before going idle, w looks again for up to linger_ns: true as soon as
+  // there is a block it may claim or the world stopped (see its definition).
+  static constexpr std::int64_t linger_ns = 50'000;
+  bool linger(const Worker& w) const;
   void release(Block& b);
   std::uint64_t completed_total() const;
   // Worker w (holding no block, in no operation) found nothing to claim:

@@ -43,7 +43,30 @@ OpRecordPool::Slab OpRecordPool::make_slab(std::size_t count) {
   return Slab(records, SlabDeleter{count});
 }
 
+namespace {
+
+// Unique among the threads alive (the address of a thread-local object).
+std::uintptr_t thread_token() {
+  thread_local const char token = 0;
+  return reinterpret_cast<std::uintptr_t>(&token);
+}
+
+// The record is about to be written whole: ask for its lines now, so that
+// the next submission finds them here rather than in the worker that
+// released the record.
+void prefetch_for_writing(const OpRecord* op) {
+  const char* p = reinterpret_cast<const char*>(op);
+  for (std::size_t at = 0; at < sizeof(OpRecord); at += 64) __builtin_prefetch(p + at, 1);
+  __builtin_prefetch(p + sizeof(OpRecord) - 1, 1);
+}
+
+}  // namespace
+
 OpRecord* OpRecordPool::acquire() {
+  std::uintptr_t owner = front_.owner.load(std::memory_order_relaxed);
+  if (owner == 0 && front_.owner.compare_exchange_strong(owner, thread_token(), std::memory_order_relaxed))
+    owner = thread_token();
+  if (owner == thread_token()) return acquire_front();
   const unsigned home = my_shard();
   // Records go back to the shard of the thread that completes them (a
   // worker's), so a submitter's own shard is often empty: it looks first
@@ -63,25 +86,52 @@ OpRecord* OpRecordPool::acquire() {
     if (OpRecord* op = take(found_last)) return op;
   for (unsigned k = 0; k < shards; ++k)
     if (OpRecord* op = take((home + k) % shards)) return op;
+  const Fresh fresh = fresh_records();
+  if (fresh.first != fresh.last) {  // the rest to this thread's shard
+    Shard& s = shards_[home];
+    std::lock_guard lock(s.mutex);
+    fresh.last->next.store(s.head, std::memory_order_relaxed);
+    s.head = fresh.first->next.load(std::memory_order_relaxed);
+  }
+  return fresh.first;
+}
+
+OpRecord* OpRecordPool::acquire_front() {
+  OpRecord* op = front_.head;
+  if (!op) op = take_list();
+  front_.head = op->next.load(std::memory_order_relaxed);
+  if (front_.head) prefetch_for_writing(front_.head);
+  return op;
+}
+
+OpRecord* OpRecordPool::take_list() {
+  thread_local unsigned found_last = 0;
+  for (unsigned k = 0; k < shards; ++k) {
+    const unsigned at = (found_last + k) % shards;
+    Shard& s = shards_[at];
+    std::lock_guard lock(s.mutex);
+    if (OpRecord* list = s.head) {
+      s.head = nullptr;
+      found_last = at;
+      return list;
+    }
+  }
+  return fresh_records().first;
+}
+
+OpRecordPool::Fresh OpRecordPool::fresh_records() {
   PDT_FAULT_POINT("op record slab");
-  std::size_t slab;
+  std::size_t count;
   {
     std::lock_guard lock(slab_mutex_);
-    slab = slabs_.size() < 4 ? 256 : slabs_.size() < 8 ? 1024 : 8192;  // a small engine stays small
+    count = slabs_.size() < 4 ? 256 : slabs_.size() < 8 ? 1024 : 8192;  // a small engine stays small
   }
-  Slab fresh = make_slab(slab);
-  OpRecord* first = fresh.get();
-  {
-    std::lock_guard lock(slab_mutex_);
-    slabs_.push_back(std::move(fresh));
-  }
-  Shard& s = shards_[home];
-  std::lock_guard lock(s.mutex);
-  for (std::size_t i = 1; i < slab; ++i) {
-    first[i].next.store(s.head, std::memory_order_relaxed);
-    s.head = &first[i];
-  }
-  return first;
+  Slab slab = make_slab(count);
+  OpRecord* first = slab.get();
+  for (std::size_t i = 0; i + 1 < count; ++i) first[i].next.store(&first[i + 1], std::memory_order_relaxed);
+  std::lock_guard lock(slab_mutex_);
+  slabs_.push_back(std::move(slab));  // may throw: the slab goes, nothing was handed out
+  return {first, first + count - 1};
 }
 
 void OpRecordPool::reset(OpRecord* op) {

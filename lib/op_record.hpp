@@ -59,8 +59,13 @@ struct OpRecord {
 // Records come in slabs (256 records at first, 8192 once the engine has
 // needed more than 5k at once) and are recycled through free lists, one per shard
 // (a thread uses the shard its id hashes to), each under its own mutex.
-// Invariant: every record is either on a free list or owned by exactly one
-// submitted operation.
+// The first thread to acquire a record (the one that built the engine, as a
+// rule: the client's submitting thread) owns a front list besides, which it
+// alone touches, without a lock: it refills it by taking a shard's whole list
+// at once, so that a single thread feeding many workers takes one shard mutex
+// per list, not one per record (each a line the releasing worker last wrote).
+// Invariant: every record is either on a free list (a shard's or the front)
+// or owned by exactly one submitted operation.
 class OpRecordPool {
  public:
   OpRecordPool();
@@ -78,6 +83,13 @@ class OpRecordPool {
     OpRecord* head = nullptr;
   };
   static unsigned my_shard();
+  OpRecord* acquire_front();  // by the front's owner only
+  OpRecord* take_list();      // a whole shard list, or else a fresh slab's records, linked
+  struct Fresh {
+    OpRecord* first;
+    OpRecord* last;
+  };
+  Fresh fresh_records();  // a new slab's records, linked first to last; throws std::bad_alloc
   struct SlabDeleter {
     std::size_t count = 0;
     void operator()(OpRecord* records) const noexcept;
@@ -85,6 +97,13 @@ class OpRecordPool {
   using Slab = std::unique_ptr<OpRecord[], SlabDeleter>;
   static Slab make_slab(std::size_t count);  // throws std::bad_alloc
   Shard shards_[shards];
+  // The front list's owner (a thread_token(), 0: none yet) and the list; on
+  // a line of their own, which no other thread writes.
+  struct alignas(64) Front {
+    std::atomic<std::uintptr_t> owner{0};
+    OpRecord* head = nullptr;
+  };
+  Front front_;
   std::mutex slab_mutex_;
   std::vector<Slab> slabs_;
 };

@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "engine_state.hpp"
+#include "for_range.hpp"
 #include "pdt/error.hpp"
 #include "point_checks.hpp"
 #include "spatial_order.hpp"
@@ -430,9 +431,21 @@ void Engine::visit(CellHandle h, CellVisitor fn, Callback done) {
 
 Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback done) {
   EngineState& e = *state_;
-  for (const Point3& p : points) {
-    detail::require_finite(p);
-    detail::require_inside(p, e.domain);
+  // Checked on the caller's arena's threads; the point refused is the first
+  // bad one in the caller's order, as a check in order would find.
+  std::atomic<std::size_t> first_bad{points.size()};
+  detail::for_range(points.size(), true, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t k = begin; k < end && k < first_bad.load(std::memory_order_relaxed); ++k)
+      if (!detail::is_finite(points[k]) || !e.domain.contains(points[k])) {
+        std::size_t seen = first_bad.load(std::memory_order_relaxed);
+        while (k < seen && !first_bad.compare_exchange_weak(seen, k, std::memory_order_relaxed)) {
+        }
+        break;
+      }
+  });
+  if (const std::size_t k = first_bad.load(); k < points.size()) {
+    detail::require_finite(points[k]);
+    detail::require_inside(points[k], e.domain);
   }
   if (points.size() >= no_vertex)
     throw Error(ErrorCode::invalid_argument,
@@ -446,16 +459,21 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   // its threads, which a hook may hold on a lock the caller has.
   shared->index = detail::spatial_order(points, true);
   shared->points.resize(points.size());
-  for (std::size_t k = 0; k < points.size(); ++k) shared->points[k] = points[shared->index[k]];
+  std::vector<std::uint32_t> block_at(points.size());  // the block of sorted point k
+  detail::for_range(points.size(), true, [&, sorted = shared->points.data(), index = shared->index.data()](
+                                               std::size_t begin, std::size_t end) {
+    // Two loops: the gather alone keeps many of its cache misses in flight.
+    for (std::size_t k = begin; k < end; ++k) sorted[k] = points[index[k]];
+    for (std::size_t k = begin; k < end; ++k) block_at[k] = e.partition.block_of(sorted[k]);
+  });
   shared->fn = std::move(done);
   shared->remaining.store(points.size());
   const std::vector<Point3>& sorted = shared->points;
   std::vector<OpRecord*> runs;
   try {
     for (std::size_t k = 0; k < sorted.size();) {
-      const std::uint32_t block = e.partition.block_of(sorted[k]);
       std::size_t end = k + 1;
-      while (end < sorted.size() && end - k < EngineState::max_run && e.partition.block_of(sorted[end]) == block) ++end;
+      while (end < sorted.size() && end - k < EngineState::max_run && block_at[end] == block_at[k]) ++end;
       runs.push_back(nullptr);
       OpRecord* op = runs.back() = e.records.acquire();
       op->kind = OpKind::insert;

@@ -14,7 +14,9 @@
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
+#include <mutex>
 #include <new>
 #include <numeric>
 #include <utility>
@@ -225,7 +227,16 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   const std::size_t n = points.size();
   if (n < 64) return cgal_order(points, parallel);
   BoundingBox box;
-  for (const Point3& p : points) box.add(p.x, p.y, p.z);
+  {
+    std::mutex merging;  // a few hundred pieces at most: their boxes merged under a lock
+    for_range(n, parallel, [&](std::size_t begin, std::size_t end) {
+      BoundingBox part;
+      for (std::size_t i = begin; i < end; ++i) part.add(points[i].x, points[i].y, points[i].z);
+      std::lock_guard lock(merging);
+      box.add(part.lo[0], part.lo[1], part.lo[2]);
+      box.add(part.hi[0], part.hi[1], part.hi[2]);
+    });
+  }
   // A flat axis maps to 0 there; a box reaching +-DBL_MAX, or a subnormal
   // one, scales without overflow (BoxLattice works on halves and pre-scales).
   const BoxLattice lattice(box.lo, box.hi, 1 << key_bits);
@@ -288,12 +299,18 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   // distinct points on one key leave them in shuffled order, so walks would
   // get long. Then CGAL's median splits, which adapt to any density.
   // (Copies of one point share their key harmlessly: not counted.)
-  std::size_t shared_keys = 0;
-  for (std::size_t i = 1; i < n; ++i)
-    shared_keys += items[i].key == items[i - 1].key && !(points[items[i].index] == points[items[i - 1].index]);
-  if (shared_keys > n / 64) return cgal_order(points, parallel);
+  std::atomic<std::size_t> shared_keys{0};
+  for_range(n, parallel, [&](std::size_t begin, std::size_t end) {
+    std::size_t here = 0;
+    for (std::size_t i = std::max<std::size_t>(begin, 1); i < end; ++i)
+      here += items[i].key == items[i - 1].key && !(points[items[i].index] == points[items[i - 1].index]);
+    shared_keys.fetch_add(here, std::memory_order_relaxed);
+  });
+  if (shared_keys.load() > n / 64) return cgal_order(points, parallel);
   std::vector<std::uint32_t> order(n);
-  for (std::size_t i = 0; i < n; ++i) order[i] = items[i].index;
+  for_range(n, parallel, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) order[i] = items[i].index;
+  });
   return order;
 }
 

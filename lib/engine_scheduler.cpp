@@ -122,7 +122,6 @@ WorkerCoroutine EngineState::body(Worker& w) {
     }
     Block* b = claim(w);
     if (!b) {
-      if (linger(w)) continue;
       if (maybe_recut(w)) continue;
       w.begin_idle(steady_ns());
       co_await IdleAwait{{this, &w}};
@@ -304,23 +303,6 @@ bool EngineState::work_for(const Worker& w) const {
   for (std::uint32_t i = nonempty.next(first, end); i < end; i = nonempty.next(i + 1, end))
     if (may_serve(w, blocks[i])) return true;
   return false;
-}
-
-// A stream submitted by one thread brings a worker's next operation within
-// microseconds as a rule, while a worker that suspends costs its submitter a
-// task enqueued into the arena (and perhaps a sleeping thread woken) to be
-// resumed: measured on 16 workers, resuming made the submitting thread the
-// bottleneck (README, Performance). So a worker that finds nothing looks
-// again, more and more sparsely, for up to linger_ns before it goes idle. It
-// holds no block and is in no operation meanwhile: a stopper does not wait
-// for it, and it returns as soon as the world stops.
-bool EngineState::linger(const Worker& w) const {
-  const std::int64_t until = steady_ns() + linger_ns;
-  for (unsigned pauses = 8;; pauses = std::min(2 * pauses, 512u)) {
-    for (unsigned k = 0; k < pauses; ++k) cpu_pause();
-    if (world.stopped() || work_for(w)) return true;
-    if (steady_ns() >= until) return false;
-  }
 }
 
 void EngineState::release(Block& b) {

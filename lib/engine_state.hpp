@@ -203,15 +203,6 @@ inline std::int64_t steady_ns() {
   return ns > 0 ? ns : 1;
 }
 
-// A spin-wait hint to the processor (a waiting loop that is no system call).
-inline void cpu_pause() {
-#if defined(__x86_64__) || defined(__i386__)
-  __builtin_ia32_pause();
-#elif defined(__aarch64__)
-  asm volatile("yield");
-#endif
-}
-
 struct EngineState {
   EngineState(Triangulation& t, const Box& d, EngineOptions o, unsigned workers, unsigned blocks, tbb::task_arena* a);
   ~EngineState();
@@ -309,10 +300,6 @@ struct EngineState {
   bool may_serve(const Worker& w, const Block& b) const;
   Block* claim(Worker& w);       // a non-empty block w may serve, claimed; or null
   bool work_for(const Worker& w) const;  // is there a block w may claim?
-  // Before going idle, w looks again for up to linger_ns: true as soon as
-  // there is a block it may claim or the world stopped (see its definition).
-  static constexpr std::int64_t linger_ns = 50'000;
-  bool linger(const Worker& w) const;
   void release(Block& b);
   std::uint64_t completed_total() const;
   // Worker w (holding no block, in no operation) found nothing to claim:

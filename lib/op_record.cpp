@@ -124,7 +124,7 @@ OpRecordPool::Fresh OpRecordPool::fresh_records() {
   std::size_t count;
   {
     std::lock_guard lock(slab_mutex_);
-    count = slabs_.size() < 4 ? 256 : slabs_.size() < 8 ? 1024 : 8192;  // a small engine stays small
+    count = slabs_.size() < 4 ? 256 : 1024;  // a small engine stays small
   }
   Slab slab = make_slab(count);
   OpRecord* first = slab.get();

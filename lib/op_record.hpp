@@ -56,8 +56,9 @@ struct OpRecord {
   std::uint32_t ticket_slot = 0;
 };
 
-// Records come in slabs (256 records at first, 8192 once the engine has
-// needed more than 5k at once) and are recycled through free lists, one per shard
+// Records come in slabs (256 records at first, 1024 from the fifth slab on;
+// a shard list may keep most of a slab unused, so slabs of 8192 added 3 MB to
+// a 16-worker batch's peak) and are recycled through free lists, one per shard
 // (a thread uses the shard its id hashes to), each under its own mutex.
 // The first thread to acquire a record (the one that built the engine, as a
 // rule: the client's submitting thread) owns a front list besides, which it

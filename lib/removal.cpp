@@ -10,6 +10,7 @@
 
 #include "fault_injection.hpp"
 #include "pdt/error.hpp"
+#include "spatial_order.hpp"
 #include "triangulation_impl.hpp"
 
 namespace pdt {
@@ -109,6 +110,26 @@ void Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<C
   }
 }
 
+// A large link (a vertex at the centre of many cospherical points, a dense
+// cluster's hub) goes into the small triangulation in spatial order, as a
+// batch would, rather than in the order the star met it: 20k points on a
+// sphere, their centre removed, took 0.75-1.2 s to triangulate in the met
+// order and 0.28 s sorted. The small ids follow the new order. (Allocates:
+// a rare path; the usual link of a few dozen vertices stays as met.)
+void Triangulation::Impl::order_link(OpContext& ctx) {
+  std::vector<Point3> points(ctx.link.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const KPoint& p = pt(ctx.link[i]);
+    points[i] = {p.x(), p.y(), p.z()};
+  }
+  PDT_FAULT_POINT("link order");
+  const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
+  std::vector<VertexId> sorted(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) sorted[i] = ctx.link[order[i]];
+  std::copy(sorted.begin(), sorted.end(), ctx.link.begin());
+  for (std::size_t i = 0; i < ctx.link.size(); ++i) verts[ctx.link[i]].scratch = static_cast<std::uint32_t>(i + 1);
+}
+
 OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
   // v is held exclusively, so every cell incident to v is stable.
   std::vector<CellId>& hole = ctx.hole;
@@ -164,6 +185,7 @@ OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
   }
   Impl& s = *ctx.small;
   s.clear();
+  if (ctx.link.size() >= large_link) order_link(ctx);
   Inserted ignored;
   for (VertexId w : ctx.link) s.insert(*s.seq, pt(w), s.seq->last_vertex, ignored);
   ctx.stats.cells_touched_by_remove += static_cast<std::uint64_t>(s.n_cells.load());

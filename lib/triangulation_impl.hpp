@@ -330,6 +330,10 @@ struct Triangulation::Impl {
   // expected_stamp: 0 = any; else the vertex must be that incarnation.
   OpStatus remove(OpContext& ctx, VertexId v, std::uint64_t expected_stamp, RemoveResult& out);
   OpStatus remove_3d(OpContext& ctx, VertexId v);
+  // A link of at least large_link vertices is put in spatial order before
+  // its small triangulation is built (removal.cpp says why).
+  static constexpr std::size_t large_link = 256;
+  void order_link(OpContext& ctx);
   // The cells incident to v (v held), in ctx.star_seen's order of discovery.
   void collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out);
   void fill_hole_flat_link(OpContext& ctx, VertexId v);

@@ -267,6 +267,28 @@ TEST_CASE("engine: integer lattice and exact cospherical points, removals after"
   }
 }
 
+TEST_CASE("engine: the centre of 510 cospherical points removed, its link put in spatial order", "[engine][tsan]") {
+  // The centre conflicts with every cell; removing it triangulates all 510
+  // points again (a link past Impl::large_link, ordered before). Drained
+  // after the centre's insertion, so its undo is a real removal.
+  const std::vector<pdt::Point3> sphere = cospherical(2025);
+  pdt::OpStream s;
+  for (const pdt::Point3& p : sphere) s.ops.push_back({pdt::Operation::Kind::insert, p, 0});
+  s.ops.push_back({pdt::Operation::Kind::insert, {0, 0, 0}, 0});
+  s.ops.push_back({pdt::Operation::Kind::remove, {}, sphere.size()});
+  s.box = bounding_box(sphere);
+  pdt::Triangulation seq;
+  replay_sequential(seq, s);
+  for (unsigned threads : {1u, 3u}) {
+    INFO(threads << " workers");
+    pdt::Triangulation t;
+    const EngineRun run =
+        replay_engine(t, s, *s.box, options_with(threads), ArenaMode::inside, 2, sphere.size() + 1);
+    require_stats(run, s.ops.size(), threads);
+    require_result(t, s, &seq);
+  }
+}
+
 TEST_CASE("engine: a start with a big coplanar layer", "[engine][tsan]") {
   // 400 points in the plane z = 0 first (dimension 2 for all of them: global
   // operations), then random points in the cube, with removals interleaved.

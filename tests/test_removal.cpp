@@ -336,6 +336,12 @@ TEST_CASE("insert then remove the same point gives back the same triangulation",
     probes.push_back({-1, 2, 3});
     run(base, probes);
   }
+  SECTION("510 cospherical points: the centre's link is all of them, put in spatial order") {
+    std::vector<Point3> base = cospherical(2025);
+    REQUIRE(base.size() >= pdt::Triangulation::Impl::large_link);
+    shuffle(base, 107);
+    run(base, {{0, 0, 0}, {1, 2, 3}, {-7, 4, 0}});
+  }
   SECTION("cospherical set; probes at the centre and on the sphere's lattice") {
     std::vector<Point3> base = cospherical(325);
     std::vector<Point3> probes{{0, 0, 0}, {1, 0, 0}, {18, 1, 0}, {0, 0, 19}, {10, 10, 10}, {-18, 0, -1}};

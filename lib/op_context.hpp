@@ -56,6 +56,13 @@ struct OpContext {
   // [fresh_cell, fresh_cell_end) are ids of its current chunk never used yet.
   FreeList free_cells, free_vertices;
   std::uint32_t fresh_cell = 0, fresh_cell_end = 0;
+  // Spare segments taken for a reservation larger than the free list keeps
+  // (a cavity of thousands of cells): reserved_cells ids, the segment being
+  // used from reserved_head on (linked by the cell list's next), the others
+  // stacked from reserved_more (linked by the spare stack's link). Used after
+  // the free list, before the fresh range. Invariant: reserved_cells counts
+  // exactly the ids reachable that way; 0 iff both heads are no_index.
+  std::uint32_t reserved_head = no_index, reserved_more = no_index, reserved_cells = 0;
   std::uint32_t fresh_vertex = 0, fresh_vertex_end = 0;
 
   // -- counters (net changes, folded into the Impl's totals by fold_counters) -

@@ -207,6 +207,10 @@ struct Triangulation::Impl {
   void free_vertex(OpContext& ctx, VertexId v);
   // Gives a context's pooled ids back to another context (engine shutdown).
   void merge_pools(OpContext& into, OpContext& from);
+  // A spare segment of cells onto ctx's reserved stack (OpContext::reserved_cells);
+  // false if there is none. And the next reserved id (reserved_cells > 0).
+  bool reserve_spare_segment(OpContext& ctx);
+  CellId pop_reserved_cell(OpContext& ctx);
   // Free-list links (storage.hpp): next id in a list, next spare segment.
   auto cell_next() {
     return [this](std::uint32_t c) -> std::uint32_t& { return cells[c].n[0]; };

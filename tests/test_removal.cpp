@@ -467,6 +467,31 @@ TEST_CASE("removal down to a coplanar, then collinear set, then back to 3D", "[r
   tr.check();
 }
 
+TEST_CASE("cavities larger than a free list reuse the ids freed before: memory stays bounded", "[remove][memory]") {
+  // The centre of 2496 cospherical points conflicts with every cell, and its
+  // removal rebuilds them all: each toggle frees and takes thousands of cell
+  // ids, more than a context's free list keeps (the rest waits in the spare
+  // stack). Before, every such cavity took a fresh range of ids: the id range
+  // (and memory_bytes) grew by the whole mesh per toggle.
+  std::vector<Point3> sphere = cospherical(32045);
+  REQUIRE(sphere.size() == 2496);
+  shuffle(sphere, 109);
+  pdt::Triangulation t;
+  insert_all(t, sphere);
+  auto toggle = [&] {
+    const auto r = t.insert({0, 0, 0});
+    REQUIRE(r.inserted);
+    REQUIRE(t.remove(r.vertex) == pdt::RemoveResult::removed);
+  };
+  toggle();
+  const std::size_t after_one = t.memory_bytes();
+  for (int k = 0; k < 20; ++k) toggle();
+  INFO("memory_bytes after 1 toggle " << after_one << ", after 21 " << t.memory_bytes());
+  REQUIRE(t.memory_bytes() <= after_one + after_one / 4);
+  require_valid(t);
+  require_same_as_cgal(t, sphere);
+}
+
 TEST_CASE("multiplicity: insert twice, remove twice", "[remove]") {
   pdt::Triangulation t;
   std::vector<Point3> pts = random_points(200, 141);

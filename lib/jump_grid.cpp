@@ -10,6 +10,7 @@
 #include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/parallel_reduce.h>
 #include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/task_group.h>
 
 #include "for_range.hpp"
 
@@ -239,12 +240,13 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
   };
   JumpGrid g;
   auto run = [&] {
+    tbb::task_group_context own(tbb::task_group_context::isolated);  // for_range.hpp says why
     const Extent e = parallel ? tbb::parallel_reduce(
                                     tbb::blocked_range<std::size_t>(0, bound, 1 << 14), Extent{},
                                     [&](const tbb::blocked_range<std::size_t>& r, Extent acc) {
                                       return join(acc, extent_of(r.begin(), r.end()));
                                     },
-                                    join)
+                                    join, own)
                               : extent_of(0, bound);
     const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));

@@ -12,6 +12,7 @@
 #include <CGAL/spatial_sort.h>
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/task_group.h>
 
 #include <algorithm>
 #include <atomic>
@@ -173,11 +174,12 @@ void radix_sort_parallel(Keyed* a, std::size_t n, Keyed* scratch, unsigned chunk
   Keyed* to = scratch;
   for (int p = 0; p < passes; ++p) {
     const int shift = p * digit_bits;
+    tbb::task_group_context counting(tbb::task_group_context::isolated);  // for_range.hpp says why
     tbb::parallel_for(0u, chunks, [&](unsigned c) {
       std::uint32_t* mine = count.data() + std::size_t{c} * digits;
       std::fill(mine, mine + digits, 0u);
       for (std::size_t i = part(c); i < part(c + 1); ++i) ++mine[(from[i].key >> shift) & (digits - 1)];
-    });
+    }, counting);
     // Offsets, digit by digit, then part by part within a digit.
     const std::size_t first_digit = (from[0].key >> shift) & (digits - 1);
     std::size_t with_first = 0;
@@ -186,10 +188,11 @@ void radix_sort_parallel(Keyed* a, std::size_t n, Keyed* scratch, unsigned chunk
     std::uint32_t sum = 0;
     for (std::size_t d = 0; d < digits; ++d)
       for (unsigned c = 0; c < chunks; ++c) sum += std::exchange(count[c * digits + d], sum);
+    tbb::task_group_context scattering(tbb::task_group_context::isolated);
     tbb::parallel_for(0u, chunks, [&](unsigned c) {
       std::uint32_t* offset = count.data() + std::size_t{c} * digits;
       for (std::size_t i = part(c); i < part(c + 1); ++i) to[offset[(from[i].key >> shift) & (digits - 1)]++] = from[i];
-    });
+    }, scattering);
     std::swap(from, to);
   }
   finish_radix_sort(a, n, from);

@@ -9,6 +9,7 @@
 // ones meant to be run in the TSan build, e.g.
 //   TSAN_OPTIONS=halt_on_error=0 ./build-tsan/tests/pdt_tests "[engine]"
 #include <oneapi/tbb/task_arena.h>
+#include <oneapi/tbb/task_group.h>
 
 #include <algorithm>
 #include <atomic>
@@ -287,6 +288,43 @@ TEST_CASE("engine: the centre of 510 cospherical points removed, its link put in
     require_stats(run, s.ops.size(), threads);
     require_result(t, s, &seq);
   }
+}
+
+TEST_CASE("engine: insert_batch from a cancelled task group checks and inserts every point", "[engine][tsan]") {
+  // A submission from a parallel loop whose sibling threw runs in a cancelled
+  // TBB context: insert_batch's parallel steps (the checks, the order, the
+  // sorted copy) must still run whole, not be skipped (which let bad points
+  // through and left the sorted copy at (0, 0, 0)).
+  std::vector<pdt::Point3> pts;
+  for (int i = 0; i < 40000; ++i) pts.push_back({1 + (i % 37) * 0.01, 1 + (i % 101) * 0.005, 1 + (i % 13) * 0.03});
+  const pdt::Box box{{1, 1, 1}, {2, 2, 2}};
+  pdt::Triangulation t;
+  bool refused = false, accepted = false;
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    tbb::task_group group;
+    group.run([&] {
+      pdt::EngineOptions o;
+      o.workers = 2;
+      pdt::Engine e(t, box, o);
+      group.cancel();
+      std::vector<pdt::Point3> bad = pts;
+      bad[12345] = {0.5, 1.5, 1.5};  // outside the domain
+      try {
+        e.insert_batch(bad);
+      } catch (const pdt::Error& err) {
+        refused = err.code() == pdt::ErrorCode::outside_domain;
+      }
+      e.insert_batch(pts);
+      e.drain();
+      accepted = true;
+    });
+    group.wait();
+  });
+  REQUIRE(refused);
+  REQUIRE(accepted);
+  require_valid(t);
+  require_same_as_cgal(t, pts);
 }
 
 TEST_CASE("engine: a start with a big coplanar layer", "[engine][tsan]") {

@@ -98,11 +98,11 @@ class OpRecordPool {
   using Slab = std::unique_ptr<OpRecord[], SlabDeleter>;
   static Slab make_slab(std::size_t count);  // throws std::bad_alloc
   Shard shards_[shards];
-  // The front list's owner (a thread_token(), 0: none yet) and the list; on
-  // a line of their own, which no other thread writes.
+  // The front list's owner (a thread_token(), 0: none yet), read by every
+  // acquire, and the list, written by the owner's: on lines of their own.
   struct alignas(64) Front {
     std::atomic<std::uintptr_t> owner{0};
-    OpRecord* head = nullptr;
+    alignas(64) OpRecord* head = nullptr;
   };
   Front front_;
   std::mutex slab_mutex_;

@@ -4,6 +4,7 @@
 // shared StableArrays; its count changes are folded into the totals later.
 #include <algorithm>
 #include <cassert>
+#include <iterator>
 #include <mutex>
 
 #include "fault_injection.hpp"
@@ -219,11 +220,14 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
   while (have() < n && reserve_spare_segment(ctx)) {
   }
   if (have() >= n) return;
-  // A new range of fresh ids, enough for n on its own (a large cavity can
-  // need more than a list ever keeps); the ids left in the current range go
-  // to the free list.
+  // A new range of fresh ids, enough with what the list and the reserved
+  // segments hold (a large cavity can need more than a list ever keeps); the
+  // ids left in the current range go to the free list, which then counts for
+  // no less than now.
   const std::size_t chunk = is_small ? small_cell_chunk : cell_chunk;
-  const std::size_t size = std::max<std::size_t>(1, (n + chunk - 1) / chunk) * chunk;
+  const std::size_t held = std::min<std::size_t>(ctx.free_cells.count, cell_segment) + ctx.reserved_cells;
+  const std::size_t short_by = n > held ? n - held : 1;
+  const std::size_t size = std::max<std::size_t>(1, (short_by + chunk - 1) / chunk) * chunk;
   std::size_t first;
   for (;;) {
     PDT_FAULT_POINT("cell chunk");
@@ -287,9 +291,24 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   // jump-grid slot, a random probe) and is checking whether it is alive. We
   // write a vertex only once we hold it, so an id we cannot lock is skipped
   // (a fresh one goes to our free list for later).
+  // The first few ids of the list are tried: one held is set aside and put
+  // back after. Under an engine the ids freed last are the ones stale grid
+  // slots still name, so the head is the id most often held; giving up at a
+  // held head took a fresh id while the list kept its own, and the id range
+  // crept up (3,000 live vertices, 300 inserted and undone per round on 2
+  // workers: 3,585 ids after 10 rounds, 6,657 after 10,000).
   VertexId v = no_vertex;
-  if (ctx.free_vertices.count && lock_exclusive(ctx, ctx.free_vertices.head))
-    v = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
+  VertexId set_aside[3];
+  unsigned aside = 0;
+  while (ctx.free_vertices.count) {
+    if (lock_exclusive(ctx, ctx.free_vertices.head)) {
+      v = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
+      break;
+    }
+    if (aside == std::size(set_aside)) break;
+    set_aside[aside++] = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
+  }
+  while (aside) give_id<vertex_segment>(ctx.free_vertices, set_aside[--aside], spare_vertices, vertex_next(), vertex_link());
   while (v == no_vertex) {
     if (ctx.fresh_vertex == ctx.fresh_vertex_end) {
       if (ctx.free_vertices.count < vertex_segment &&

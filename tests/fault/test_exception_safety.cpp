@@ -55,10 +55,17 @@ void require_unchanged(const pdt::Triangulation& t, const PointIndex& index, con
 // Runs op with the k-th fault point failing, k = 0, 1, ...; after every
 // failure the triangulation must be as it was. Returns how many failures
 // were injected before op got through.
-std::uint64_t fail_each_point(pdt::Triangulation& t, const std::vector<Point3>& known, const std::function<void()>& op) {
+// With `first` given, only the first `first` points are failed; then op
+// runs without failures.
+std::uint64_t fail_each_point(pdt::Triangulation& t, const std::vector<Point3>& known, const std::function<void()>& op,
+                              std::set<std::string>* sites = nullptr, std::uint64_t first = 10000) {
   const PointIndex index = make_point_index(known);
   const Snapshot before = snapshot(t, index);
   for (std::uint64_t k = 0;; ++k) {
+    if (first < 10000 && k == first) {
+      op();
+      return k;
+    }
     REQUIRE(k < 10000);
     fault::arm(k);
     bool failed = false;
@@ -69,6 +76,7 @@ std::uint64_t fail_each_point(pdt::Triangulation& t, const std::vector<Point3>& 
     }
     fault::disarm();
     if (!failed) return k;
+    if (sites) sites->insert(fault::last_failed_site());
     INFO("failure injected at point " << k << " (" << fault::last_failed_site() << ")");
     require_unchanged(t, index, before);
   }
@@ -105,6 +113,33 @@ TEST_CASE("fault: every allocation an insertion or a removal makes may fail, cha
       if (!(q == p)) left.push_back(q);
     require_same_as_cgal(t, left);
   }
+}
+
+TEST_CASE("fault: the centre of 510 cospherical points: a huge cavity and a large link fail cleanly", "[fault]") {
+  // The centre conflicts with every cell (its cavity is the whole mesh, past
+  // what a free list keeps: reserved spare segments), and its removal puts
+  // the 510-vertex link in spatial order before triangulating it. The
+  // insertion and the removal have thousands of allocation points each (a
+  // cell made, a link vertex inserted into the small triangulation): the
+  // first 400 and 200 are failed in turn, which covers the reservations and
+  // everything before the small triangulation's insertions.
+  std::vector<Point3> sphere = cospherical(2025);
+  shuffle(sphere, 111);
+  pdt::Triangulation t;
+  t.insert_batch(sphere);
+  const Point3 centre{0, 0, 0};
+  t.remove(t.insert(centre).vertex);  // leaves the freed ids in the spare stack
+  std::vector<Point3> known = sphere;
+  known.push_back(centre);
+  std::set<std::string> sites;
+  fail_each_point(t, known, [&] { t.insert(centre); }, &sites, 400);
+  require_same_as_cgal(t, known);
+  const pdt::VertexId v = t.nearest_vertex(centre);
+  REQUIRE(t.point(v) == centre);
+  fail_each_point(t, known, [&] { t.remove(v); }, &sites, 200);
+  require_same_as_cgal(t, sphere);
+  INFO("sites failed: " << sites.size());
+  REQUIRE(sites.count("link order") == 1);
 }
 
 TEST_CASE("fault: changes of dimension fail cleanly too", "[fault]") {

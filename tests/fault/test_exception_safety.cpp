@@ -119,10 +119,10 @@ TEST_CASE("fault: the centre of 510 cospherical points: a huge cavity and a larg
   // The centre conflicts with every cell (its cavity is the whole mesh, past
   // what a free list keeps: reserved spare segments), and its removal puts
   // the 510-vertex link in spatial order before triangulating it. The
-  // insertion and the removal have thousands of allocation points each (a
-  // cell made, a link vertex inserted into the small triangulation): the
-  // first 400 and 200 are failed in turn, which covers the reservations and
-  // everything before the small triangulation's insertions.
+  // insertion and the removal reach thousands of allocation points each (the
+  // removal's mostly in the small triangulation): the first 400 and 200 are
+  // failed in turn; the removal's include the link's ordering ('link order',
+  // checked below).
   std::vector<Point3> sphere = cospherical(2025);
   shuffle(sphere, 111);
   pdt::Triangulation t;

@@ -515,24 +515,34 @@ bool EngineState::idle_everywhere() const { return in_flight() == 0; }
 // ---------------------------------------------------------------------------
 // The jump grid's growth, with the world stopped
 // ---------------------------------------------------------------------------
-void EngineState::ensure_grid(bool parallel) {
+void EngineState::ensure_grid(bool parallel, bool follow) {
   if (impl.dim.load() < 3) return;  // no grid below dimension 3
   const std::size_t ids = impl.verts.size();
-  if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) return;
+  if (follow) {
+    if (!impl.grid.grown_since_build(static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()))))
+      return;  // another worker's rebuild came first
+    grid_follows = true;
+  } else if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) {
+    return;
+  }
   // Over the live vertices' bounding box, about two vertices per slot.
-  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, std::max<std::size_t>(opts.grid_slots, 1)), parallel);
+  const std::size_t most = std::max<std::size_t>(opts.grid_slots, 1);
+  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, most), parallel, most, grid_follows);
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
 }
 
 void EngineState::maybe_grow_grid(Worker& w) {
   // Below dimension 3 there is no grid; the global step that builds the
   // tetrahedra sizes it (run_global calls ensure_grid).
-  if (impl.verts.size() < grid_grow_at.load(std::memory_order_relaxed) || impl.dim.load(std::memory_order_relaxed) < 3)
-    return;
+  if (impl.dim.load(std::memory_order_relaxed) < 3) return;
+  const bool grow = impl.verts.size() >= grid_grow_at.load(std::memory_order_relaxed);
+  const bool follow = !grow && w.walks.long_walks(w.ctx->stats.walk_steps, w.ctx->stats.insertions) &&
+                      impl.grid.grown_since_build(static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
+  if (!grow && !follow) return;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too
   try {
-    ensure_grid(true);  // on this worker's thread and the suspended workers' (their threads are free)
+    ensure_grid(true, follow);  // on this worker's thread and the suspended workers' (their threads are free)
   } catch (const std::bad_alloc&) {
     // The old grid stays (it was built aside); walks are longer, nothing is wrong.
     grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);

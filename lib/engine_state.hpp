@@ -145,6 +145,7 @@ struct alignas(64) Worker {
   std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
+  WalkWatch walks;  // this worker's walks since the grid's build (maybe_grow_grid)
   // The batch point this worker took last: its batch (the BatchCallback's
   // address, compared only, never read through) and its position + 1. A run
   // that does not go on from there walks from the jump grid, not from
@@ -247,6 +248,10 @@ struct EngineState {
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
+  // Set once a worker's walks stayed long (WalkWatch): from then on the grid
+  // is a tree that follows the vertices, never equal slots (with the world
+  // stopped, by its stopper).
+  bool grid_follows = false;
   // The change hook, and the wrapper the kernel calls (it catches).
   ChangeHook user_hook;
   ChangeHook kernel_hook;
@@ -332,7 +337,8 @@ struct EngineState {
   // -- the jump grid's growth, with the world stopped ---------------------------------
   // With the world stopped (parallel: in the arena, whose other workers are
   // suspended), or before workers run.
-  void ensure_grid(bool parallel = false);
+  // follow: now, and as a tree from now on (a worker's walks stayed long).
+  void ensure_grid(bool parallel = false, bool follow = false);
   void maybe_grow_grid(Worker& w);
 };
 

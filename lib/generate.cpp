@@ -192,6 +192,15 @@ void gen_kuzmin(Rng& rng, std::uint64_t n, std::vector<Point3>& pts) {
   }
 }
 
+void gen_clusters(Rng& rng, std::uint64_t n, std::vector<Point3>& pts) {
+  gen_uniform(rng, n, pts);
+  for (std::uint64_t i = 1; i < n; i += 2) {
+    const double c = (i / 2) % 2 ? 0.7 : 0.2;
+    Point3& p = pts[static_cast<std::size_t>(i)];
+    p = {c + 1e-4 * p.x, c + 1e-4 * p.y, c + 1e-4 * p.z};
+  }
+}
+
 // Uniform points in increasing order of one coordinate (ties keep their draw order).
 void gen_front(Rng& rng, std::uint64_t n, int axis, std::vector<Point3>& pts) {
   gen_uniform(rng, n, pts);
@@ -342,6 +351,7 @@ OpStream generate(const GenerateOptions& o) {
     case Distribution::front_x: gen_front(point_rng, n, 0, pts); break;
     case Distribution::front_y: gen_front(point_rng, n, 1, pts); break;
     case Distribution::front_z: gen_front(point_rng, n, 2, pts); break;
+    case Distribution::clusters: gen_clusters(point_rng, n, pts); break;
     default: throw Error(ErrorCode::invalid_argument, "generate: unknown distribution");
   }
 
@@ -396,11 +406,11 @@ OpStream generate(const GenerateOptions& o) {
 Distribution parse_distribution(const std::string& name) {
   for (Distribution d : {Distribution::uniform, Distribution::normal, Distribution::line, Distribution::grid,
                          Distribution::sphere, Distribution::corner, Distribution::kuzmin, Distribution::front_x,
-                         Distribution::front_y, Distribution::front_z})
+                         Distribution::front_y, Distribution::front_z, Distribution::clusters})
     if (name == to_string(d)) return d;
   throw Error(ErrorCode::invalid_argument, "unknown distribution '" + name +
                                                "'; expected uniform, normal, line, grid, sphere, corner, kuzmin, "
-                                               "front_x, front_y or front_z");
+                                               "front_x, front_y, front_z or clusters");
 }
 
 const char* to_string(Distribution d) {
@@ -415,6 +425,7 @@ const char* to_string(Distribution d) {
     case Distribution::front_x: return "front_x";
     case Distribution::front_y: return "front_y";
     case Distribution::front_z: return "front_z";
+    case Distribution::clusters: return "clusters";
   }
   return "unknown";
 }

@@ -2,6 +2,7 @@
 #include "jump_grid.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <cstdlib>
@@ -74,7 +75,7 @@ VertexId JumpGrid::lookup(const KPoint& p) const {
   return no_vertex;
 }
 
-JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {
+JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, bool even_floor, std::size_t most) {
   BoundingBox box;
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
@@ -127,6 +128,12 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
     JumpGrid g;
     const bool root_leaf = is_leaf(n, 0);
     g.lattice = BoxLattice(box.lo, box.hi, static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
+    // even_floor: the root's leaves are cut at least as finely as the
+    // vertices spread evenly over the box would cut them (a child the build
+    // finds empty may fill later).
+    const double root_cells = std::pow(static_cast<double>(g.lattice.res), 3);
+    const double floor_k =
+        even_floor && !last ? std::max(1.0, std::round(std::cbrt(static_cast<double>(n) / root_cells / per_slot))) : 1.0;
     // Breadth first, so that a node's children are consecutive; queue[i]
     // describes node i.
     nodes.clear(false);
@@ -138,7 +145,9 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
       const Pending at = queue[q];
       const std::size_t c = at.end - at.begin;
       const bool leaf = q == 0 ? root_leaf : is_leaf(c, at.depth);
-      const auto k = static_cast<std::uint32_t>(q == 0 ? g.lattice.res : leaf ? leaf_k(c) : inner_k(c));
+      const auto k = static_cast<std::uint32_t>(q == 0   ? g.lattice.res
+                                                : leaf   ? std::max(leaf_k(c), at.depth == 1 ? floor_k : 1.0)
+                                                         : inner_k(c));
       const std::uint32_t cells = k * k * k;
       if (leaf) {
         nodes[q] = {static_cast<std::uint32_t>(total), k | leaf_bit};
@@ -175,8 +184,9 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
       for (std::size_t i = at.begin; i < at.end; ++i) ids2[at.begin + offsets[child[i]]++] = ids[i];
       for (std::size_t i = at.begin; i < at.end; ++i) ids[i] = ids2[i];
     }
-    if (total > want && !last) {
-      per_slot *= 1.25 * static_cast<double>(total) / static_cast<double>(want);
+    const std::size_t limit = std::min<std::size_t>(std::max(want, most), std::size_t{1} << 30);
+    if (total > limit && !last) {
+      per_slot *= 1.25 * static_cast<double>(total) / static_cast<double>(limit);
       continue;
     }
     g.node_count = nodes.size();
@@ -260,22 +270,37 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
       for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
     });
     // Each slot keeps its largest id: one thread going up the ids stores
-    // each; pieces in parallel keep the larger, whichever comes first.
+    // each; pieces in parallel keep the larger, whichever comes first. And
+    // each slot's vertices are counted, for `crowded` (scratch mapped for
+    // the build and unmapped after it, as in build).
+    StableArray<std::uint32_t> counts(g.slot_count);
+    counts.grow(g.slot_count, false);  // zeros
     for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
         if (verts[v].multiplicity == 0) continue;
-        std::atomic<VertexId>& slot = g.slots[g.slot_of(verts[v].p)];
+        const std::size_t s = g.slot_of(verts[v].p);
+        std::atomic<VertexId>& slot = g.slots[s];
         if (!parallel) {
           slot.store(static_cast<VertexId>(v), std::memory_order_relaxed);
+          ++counts[s];
           continue;
         }
+        std::atomic_ref<std::uint32_t>(counts[s]).fetch_add(1, std::memory_order_relaxed);
         VertexId now = slot.load(std::memory_order_relaxed);
         while ((now == no_vertex || now < v) &&
                !slot.compare_exchange_weak(now, static_cast<VertexId>(v), std::memory_order_relaxed)) {
         }
       }
     });
+    std::atomic<std::size_t> crowded{0};
+    for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
+      std::size_t here = 0;
+      for (std::size_t s = begin; s < end; ++s)
+        if (counts[s] > crowded_slot) here += counts[s];
+      crowded.fetch_add(here, std::memory_order_relaxed);
+    });
     g.built_for = e.n;
+    g.crowded = crowded.load(std::memory_order_relaxed);
   };
   if (parallel)
     tbb::this_task_arena::isolate(run);

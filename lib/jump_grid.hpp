@@ -13,7 +13,9 @@
 // scanned surface, points near a line) tens of vertices per slot where they
 // are, and walks that many cells longer. For uniform points the tree is two
 // levels: the root's grid, and leaves of 1, 8 or 27 slots (mostly 8). The
-// engine builds only the root, as equal slots (see grid_rebuild).
+// engine builds only the root, as equal slots, unless the equal slots are
+// crowded (a cluster): then a tree whose leaves under the root are cut at
+// least as finely as equal slots would be (see grid_rebuild).
 //
 // Encoding: nodes[i] = {first, k | leaf_bit}: an inner node's children are
 // nodes [first, first + k^3), a leaf's slots are slots [first, first + k^3);
@@ -56,6 +58,10 @@ struct JumpGrid {
   std::size_t node_count = 0;
   std::size_t slot_count = 0;  // 0: no grid
   std::size_t built_for = 0;   // live vertices when it was built
+  // build_equal: the live vertices in slots holding more than crowded_slot
+  // of them when it was built (equal slots serve a cluster badly); 0 for build's.
+  static constexpr std::uint32_t crowded_slot = 16;
+  std::size_t crowded = 0;
 
   // The cell of a k^3 grid that holds fraction f in [0, 1] along an axis, and
   // f's fraction within that cell.
@@ -114,7 +120,13 @@ struct JumpGrid {
   // slots when given (and about that many when the vertices are spread
   // evenly), else about 2 vertices per slot. Counts the vertices itself (the
   // triangulation's totals lag while engine workers hold deltas).
-  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0);
+  // even_floor: the root's children are cut at least as finely as for
+  // vertices spread evenly over the box, where the build finds few (for an
+  // engine whose equal slots are crowded: see build_equal). most: the slots
+  // it may take (at least `slots`; the floor comes on top of where the
+  // vertices are).
+  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0, bool even_floor = false,
+                        std::size_t most = 0);
   // One level of equal slots over the same box, as many as fit in `slots`
   // (about n / 2 when 0): for the engine, whose workers fill the domain
   // block by block, so that the vertices at a rebuild say little about where
@@ -126,10 +138,38 @@ struct JumpGrid {
   static JumpGrid build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel);
   // Bytes it holds.
   std::size_t bytes() const { return slot_count * sizeof(VertexId) + node_count * sizeof(Node); }
+  // Whether a rebuild before the vertex count doubles may pay (WalkWatch):
+  // a quarter more live vertices than it was built for.
+  bool grown_since_build(std::size_t live) const {
+    return slot_count != 0 && live >= built_for + std::max<std::size_t>(1024, built_for / 4);
+  }
 
  private:
   // A filled slot of node n's subtree, reading at most `budget` slots.
   VertexId any_in(std::uint32_t n, int& budget) const;
+};
+
+// Walks that stay long after a build say the vertices have moved since (a
+// region filled after it: a cluster, a zone a refiner refines, the blocks one
+// worker serves in turn), and the grid is rebuilt then instead of when the
+// vertex count doubles (JumpGrid::grown_since_build bounds how often). One per
+// context that inserts (its stats): long_walks looks once per `window`
+// insertions. Invariant: steps and insertions never exceed the counts last
+// looked at (a count found smaller restarts the watch).
+struct WalkWatch {
+  static constexpr std::uint64_t window = 1024;   // insertions between two looks
+  static constexpr std::uint64_t long_walk = 20;  // steps per insertion that are long (uniform points: 6-7)
+  std::uint64_t steps = 0, insertions = 0;        // the counts at the last look
+  bool long_walks(std::uint64_t walk_steps, std::uint64_t inserted) {
+    if (inserted < insertions || walk_steps < steps) {
+      steps = walk_steps, insertions = inserted;
+      return false;
+    }
+    if (inserted - insertions < window) return false;
+    const bool long_ = walk_steps - steps > long_walk * (inserted - insertions);
+    steps = walk_steps, insertions = inserted;
+    return long_;
+  }
 };
 
 }  // namespace pdt::detail

@@ -133,6 +133,7 @@ struct Triangulation::Impl {
   // engine workers only read it.
   detail::BoxFilter filter;
   detail::JumpGrid grid;
+  detail::WalkWatch walk_watch;  // the kernel's (grid_note); an engine's workers have their own
   // Who regrows the jump grid as the vertex count grows.
   enum class GridGrowth { kernel, engine } grid_growth = GridGrowth::kernel;
   std::unique_ptr<OpContext> seq;  // the context of single-threaded calls
@@ -298,7 +299,8 @@ struct Triangulation::Impl {
   bool in_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const;
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
   // parallel: an engine's equal slots, built in the current TBB arena (with the world stopped).
-  void grid_rebuild(std::size_t slots = 0, bool parallel = false);
+  // most: an engine's cap; follow: an engine's tree whatever the crowding.
+  void grid_rebuild(std::size_t slots = 0, bool parallel = false, std::size_t most = 0, bool follow = false);
 
   // Read-only queries in a context (its locks, its scratch). A locking
   // context takes shared locks and reports rollback on a conflict (holding

@@ -1147,6 +1147,27 @@ TEST_CASE("engine: a large batch mostly undone keeps the rest by ticket", "[engi
   REQUIRE(t.number_of_vertices() == 0);
 }
 
+namespace {
+// Submits pts one at a time to an engine of `workers` over `domain`, in an
+// arena of `threads`; checks the result against CGAL; returns the walk steps
+// per insertion.
+double engine_walk_steps(const std::vector<Point3>& pts, unsigned workers, int threads,
+                         const pdt::Box& domain = {{0, 0, 0}, {1, 1, 1}}) {
+  pdt::Triangulation t;
+  tbb::task_arena arena(threads);
+  arena.execute([&] {
+    pdt::Engine e(t, domain, options_with(workers));
+    ErrorSink errors;
+    for (const auto& p : pts) e.insert(p, errors.callback());
+    e.drain();
+    errors.require_none();
+  });
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+  return double(t.stats().walk_steps) / double(t.stats().insertions);
+}
+}  // namespace
+
 TEST_CASE("engine: a domain reaching the largest doubles", "[engine][extreme]") {
   // The domain check and the block routing must not overflow either.
   const double m = std::numeric_limits<double>::max();
@@ -1156,17 +1177,7 @@ TEST_CASE("engine: a domain reaching the largest doubles", "[engine][extreme]") 
       for (int z : {-1, 1}) pts.push_back({x * m, y * m, z * m});
   for (const auto& p : random_points(2000, 96, -1, 1)) pts.push_back({p.x * m, p.y * m, p.z * m});
   for (const auto& p : random_points(500, 97, -1, 1)) pts.push_back({p.x * 1e-300, p.y, p.z * 1e300});
-  pdt::Triangulation t;
-  tbb::task_arena arena(2);
-  arena.execute([&] {
-    pdt::Engine e(t, {{-m, -m, -m}, {m, m, m}}, options_with(4));
-    ErrorSink errors;
-    for (const auto& p : pts) e.insert(p, errors.callback());
-    e.drain();
-    errors.require_none();
-  });
-  require_valid(t);
-  require_same_as_cgal(t, pts);
+  (void)engine_walk_steps(pts, 4, 2, {{-m, -m, -m}, {m, m, m}});
 }
 
 TEST_CASE("engine: drain() from the engine's own callback is refused, not a deadlock", "[engine]") {
@@ -1637,6 +1648,46 @@ TEST_CASE("engine: recuts happen when the work piles up in one block, and give C
   }
 }
 
+TEST_CASE("engine: one worker's walks stay short where its blocks fill a cluster late", "[engine][tsan]") {
+  // Half the points uniform in the unit cube, half in a cube of side 1e-3,
+  // interleaved. One worker serves the blocks in turn, so the cluster's block
+  // fills between two rebuilds of the grid (as the vertex count doubles),
+  // whose equal slots held it in one: 34 steps per insertion here (66 at
+  // 400k points; 8 now). Long walks now rebuild it early, as a tree that
+  // follows the vertices.
+  const std::size_t n = scaled(40000, 10000);
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point3> pts{{0, 0, 0}, {1, 1, 1}};
+  for (std::size_t i = 0; i < n; ++i)
+    pts.push_back(i % 2 ? Point3{u(rng), u(rng), u(rng)} : Point3{0.3 + 1e-3 * u(rng), 0.3 + 1e-3 * u(rng), 0.3 + 1e-3 * u(rng)});
+  const double steps = engine_walk_steps(pts, 1, 1);
+  INFO("walk steps per insertion " << steps);
+  CHECK(steps < 15);
+}
+
+TEST_CASE("engine: walks stay short in clusters far smaller than the box", "[engine][tsan]") {
+  // Two clusters of side 1e-4 in the unit cube, submitted singly in random
+  // order. Equal slots over the box held each cluster in a slot or two, and
+  // every walk started at the slot's vertex, across its cluster: 65 steps per
+  // insertion at 50k points, 104 at 200k, with 1 or 2 workers (the
+  // sequential kernel's tree: 7). The rebuilds now see the crowded slots and
+  // build a tree that follows the clusters.
+  const std::size_t n = scaled(40000, 10000);
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point3> pts{{0, 0, 0}, {1, 1, 1}};
+  for (std::size_t i = 0; i < n; ++i) {
+    const double c = i % 2 ? 0.2 : 0.7;
+    pts.push_back({c + 1e-4 * u(rng), c + 1e-4 * u(rng), c + 1e-4 * u(rng)});
+  }
+  for (unsigned workers : {1u, 2u}) {
+    const double steps = engine_walk_steps(pts, workers, 2);
+    INFO(workers << " workers, walk steps per insertion " << steps);
+    CHECK(steps < 20);
+  }
+}
+
 TEST_CASE("engine: an insert_batch piled in one block is re-cut too, and gives CGAL's triangulation",
           "[engine][balance][tsan]") {
   // insert_batch queues runs of up to 256 points as one record each; the
@@ -1687,6 +1738,25 @@ TEST_CASE("engine: the skewed generators put their points where they say", "[eng
     near += dx * dx + dy * dy + dz * dz < 0.1 * 0.1;
   }
   CHECK(near > 5000 / 2);  // a cluster: most points within 0.1 of the centre
+  g.dist = pdt::Distribution::clusters;
+  const pdt::OpStream clustered = pdt::generate(g);
+  REQUIRE(clustered.ops.size() == 5000);
+  std::size_t in_cube[2] = {0, 0};
+  for (std::size_t i = 0; i < clustered.ops.size(); ++i) {
+    const Point3& p = clustered.ops[i].point;
+    REQUIRE(p.x >= 0);
+    REQUIRE(p.x <= 1);
+    for (int c = 0; c < 2; ++c) {
+      const double lo = c ? 0.7 : 0.2;
+      if (p.x >= lo && p.x <= lo + 1e-4 && p.y >= lo && p.y <= lo + 1e-4 && p.z >= lo && p.z <= lo + 1e-4) {
+        ++in_cube[c];
+        REQUIRE(i % 2 == 1);  // every other point
+      }
+    }
+  }
+  CHECK(in_cube[0] == 1250);
+  CHECK(in_cube[1] == 1250);
+  CHECK(pdt::parse_distribution("clusters") == pdt::Distribution::clusters);
   int axis = 0;
   for (pdt::Distribution d : {pdt::Distribution::front_x, pdt::Distribution::front_y, pdt::Distribution::front_z}) {
     g.dist = d;

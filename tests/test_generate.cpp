@@ -47,8 +47,10 @@ bool identical(const pdt::OpStream& a, const pdt::OpStream& b) {
   return true;
 }
 
-const pdt::Distribution kAll[] = {pdt::Distribution::uniform, pdt::Distribution::normal, pdt::Distribution::line,
-                                  pdt::Distribution::grid, pdt::Distribution::sphere};
+const pdt::Distribution kAll[] = {pdt::Distribution::uniform, pdt::Distribution::normal,  pdt::Distribution::line,
+                                  pdt::Distribution::grid,    pdt::Distribution::sphere,  pdt::Distribution::corner,
+                                  pdt::Distribution::kuzmin,  pdt::Distribution::front_x, pdt::Distribution::front_y,
+                                  pdt::Distribution::front_z, pdt::Distribution::clusters};
 
 bool is_integer(double v) { return std::floor(v) == v && std::abs(v) < 1e9; }
 

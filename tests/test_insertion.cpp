@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -815,18 +816,91 @@ TEST_CASE("the engine's jump grid of equal slots is the same built in parallel o
   CHECK(serial.built_for == t.number_of_vertices());
   CHECK(parallel.built_for == t.number_of_vertices());
   std::vector<pdt::VertexId> largest(serial.slot_count, pdt::no_vertex);
+  std::vector<std::size_t> count(serial.slot_count, 0);
   for (pdt::VertexId v = 1; v < m.verts.size(); ++v)
     if (t.is_vertex(v)) {
-      pdt::VertexId& l = largest[serial.slot_of(m.verts[v].p)];
+      const std::size_t s = serial.slot_of(m.verts[v].p);
+      pdt::VertexId& l = largest[s];
       if (l == pdt::no_vertex || l < v) l = v;
+      ++count[s];
     }
-  std::size_t differ = 0, filled = 0;
+  std::size_t differ = 0, filled = 0, crowded = 0;
   for (std::size_t s = 0; s < serial.slot_count; ++s) {
     differ += serial.get(s) != largest[s] || parallel.get(s) != largest[s];
     filled += largest[s] != pdt::no_vertex;
+    if (count[s] > pdt::detail::JumpGrid::crowded_slot) crowded += count[s];
   }
   CHECK(differ == 0);
   CHECK(filled > serial.slot_count / 2);
+  // The vertices in crowded slots, counted alike (none here: about 2 per slot).
+  CHECK(serial.crowded == crowded);
+  CHECK(parallel.crowded == crowded);
+  CHECK(crowded < t.number_of_vertices() / 100);
+}
+
+TEST_CASE("the kernel's jump grid follows a region filled after its build", "[insert][locate]") {
+  // 20k uniform points, then 20k in a cube of side 1e-4, one at a time (a
+  // refiner refining one zone). The grid built for the first half holds the
+  // cube in one slot until the vertex count doubles, and every walk crossed
+  // the cube from the slot's last vertex (35 steps per insertion there; 12
+  // now). Walks that stay long now rebuild the grid early (WalkWatch).
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point3> pts;
+  for (int i = 0; i < 20000; ++i) pts.push_back({u(rng), u(rng), u(rng)});
+  for (int i = 0; i < 20000; ++i) pts.push_back({0.4 + 1e-4 * u(rng), 0.5 + 1e-4 * u(rng), 0.6 + 1e-4 * u(rng)});
+  pdt::Triangulation t;
+  for (std::size_t i = 0; i < 20000; ++i) t.insert(pts[i]);
+  const std::uint64_t steps_before = t.stats().walk_steps;
+  for (std::size_t i = 20000; i < pts.size(); ++i) t.insert(pts[i]);
+  const double steps = double(t.stats().walk_steps - steps_before) / 20000.0;
+  INFO("walk steps per insertion in the cube " << steps);
+  CHECK(steps < 15);
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
+TEST_CASE("an engine's jump grid follows a cluster far smaller than the box", "[insert][locate]") {
+  // Half the points uniform in the unit cube, half in a cube of side 1e-4:
+  // equal slots would hold the cluster in one slot, and a walk from there
+  // would cross the cluster (tens of steps). build_equal counts the vertices
+  // in crowded slots; the engine's rebuild then builds a tree cut at least as
+  // finely as the equal slots elsewhere, in at most twice their slots.
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point3> pts;
+  for (int i = 0; i < 40000; ++i)
+    pts.push_back(i % 2 ? Point3{u(rng), u(rng), u(rng)} : Point3{0.3 + 1e-4 * u(rng), 0.6 + 1e-4 * u(rng), 0.2 + 1e-4 * u(rng)});
+  pdt::Triangulation t;
+  (void)t.insert_batch(pts);
+  auto& m = pdt::detail::impl_of(t);
+  const auto equal = pdt::detail::JumpGrid::build_equal(m.verts, 20000, false);
+  CHECK(equal.crowded >= 20000);  // the cluster's vertices at least
+  CHECK(5 * equal.crowded > 2 * equal.built_for);  // over 40%: grid_rebuild's rule
+  m.grid_growth = pdt::Triangulation::Impl::GridGrowth::engine;
+  m.grid_rebuild(20000, false, 1u << 23);
+  const pdt::detail::JumpGrid& g = m.grid;
+  REQUIRE(g.node_count > 1);  // a tree, not equal slots
+  REQUIRE(g.slot_count <= 2 * equal.slot_count);
+  // Seen from a vertex, the mean number of vertices sharing its slot, in the
+  // cluster and out of it: about what equal slots give uniform points.
+  std::vector<std::size_t> count(g.slot_count, 0);
+  for (pdt::VertexId v = 1; v < m.verts.size(); ++v)
+    if (t.is_vertex(v)) ++count[g.slot_of(m.verts[v].p)];
+  double in_cluster = 0, outside = 0;
+  std::size_t n_in = 0, n_out = 0;
+  for (pdt::VertexId v = 1; v < m.verts.size(); ++v) {
+    if (!t.is_vertex(v)) continue;
+    const Point3 p{m.verts[v].p.x(), m.verts[v].p.y(), m.verts[v].p.z()};
+    const bool in = p.x >= 0.3 && p.x <= 0.3 + 1e-4 && p.y >= 0.6 && p.y <= 0.6 + 1e-4;
+    (in ? in_cluster : outside) += static_cast<double>(count[g.slot_of(m.verts[v].p)]);
+    ++(in ? n_in : n_out);
+  }
+  INFO("sharing in the cluster " << in_cluster / n_in << ", outside " << outside / n_out << ", slots " << g.slot_count);
+  CHECK(in_cluster / static_cast<double>(n_in) < 10);
+  CHECK(outside / static_cast<double>(n_out) < 10);
+  m.grid_growth = pdt::Triangulation::Impl::GridGrowth::kernel;
+  require_valid(t);
 }
 
 TEST_CASE("a large insert_batch regrows the jump grid without noting each vertex, a small one notes them", "[insert][locate]") {

@@ -21,7 +21,7 @@ const char* const gen_usage =
     "\n"
     "options:\n"
     "  --dist D               uniform (default), normal, line, grid, sphere, corner, kuzmin,\n"
-    "                         front_x, front_y, front_z (generate.hpp says what each is)\n"
+    "                         front_x, front_y, front_z, clusters (generate.hpp says what each is)\n"
     "  --points N             number of insertions (e.g. 1000000 or 1e6)\n"
     "  --remove-fraction F    fraction in [0, 1] of the insertions to undo (default 0)\n"
     "  --interleaved          put each removal soon after its insertion (default: all at the end)\n"

@@ -471,6 +471,12 @@ int cmd_run(Args args) {
   const double total = st.insert_seconds + st.remove_seconds + st.mixed_seconds;
   row("operations/s", total > 0 ? format_count(static_cast<std::uint64_t>(static_cast<double>(st.operations) / total))
                                 : std::string("n/a"));
+  if (st.insertions) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "%.1f per insertion (visibility walk; locations of other kinds included)",
+                  static_cast<double>(t.stats().walk_steps) / static_cast<double>(st.insertions));
+    row("walk steps", buf);
+  }
   // Before the mesh is written, which copies it (extract_mesh): the run's own peak.
   const std::uint64_t peak = pdt::support::peak_rss_bytes();
   if (st.engine) print_engine_stats(st);

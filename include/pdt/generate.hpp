@@ -25,6 +25,9 @@ enum class Distribution {
   front_x,  // uniform in the unit cube, streamed in increasing x: a front sweeping the domain
   front_y,  // the same, in increasing y
   front_z,  // the same, in increasing z
+  clusters,  // every other point uniform in the unit cube, the rest alternately in the cubes
+             // of side 1e-4 at (0.2, 0.2, 0.2) and (0.7, 0.7, 0.7): two clusters far smaller
+             // than the domain, amid a uniform cloud
 };
 
 // The first floor(F * N) insertions (F = remove_fraction) are undone:

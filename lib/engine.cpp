@@ -78,11 +78,14 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   // engine made each one cost time in proportion to the mesh, so that many
   // short-lived engines on a large mesh spent most of their time here. Else
   // built now, while grid_growth still says kernel: a tree that follows the
-  // vertices there are (the engine's own rebuilds use equal slots).
-  if (impl.grid.slot_count != 0 && 2 * impl.grid.built_for >= static_cast<std::size_t>(impl.n_vertices.load()))
+  // vertices there are (the engine's own rebuilds use equal slots, cut again
+  // where crowded).
+  if (impl.grid.slot_count != 0 && 2 * impl.grid.built_for >= static_cast<std::size_t>(impl.n_vertices.load())) {
     grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);
-  else
+    grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
+  } else {
     ensure_grid();  // built aside: a failure leaves the old grid
+  }
   bodies.reserve(nworkers);
   for (auto& w : workers) {
     bodies.push_back(body(*w));  // room reserved: no throw after the frame exists

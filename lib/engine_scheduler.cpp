@@ -521,14 +521,17 @@ void EngineState::ensure_grid(bool parallel, bool follow) {
   if (follow) {
     if (!impl.grid.grown_since_build(static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()))))
       return;  // another worker's rebuild came first
-    grid_follows = true;
   } else if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) {
     return;
   }
   // Over the live vertices' bounding box, about two vertices per slot.
   const std::size_t most = std::max<std::size_t>(opts.grid_slots, 1);
-  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, most), parallel, most, grid_follows);
+  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, most), parallel, most, grid_follows || follow);
+  if (follow) grid_follows = true;  // after the rebuild: a failed one changes nothing
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
+  grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
+  // A grid at the cap may not get finer: walks long then are not its age.
+  grid_may_grow.store(impl.grid.slot_count < most / 2, std::memory_order_relaxed);
 }
 
 void EngineState::maybe_grow_grid(Worker& w) {
@@ -536,8 +539,12 @@ void EngineState::maybe_grow_grid(Worker& w) {
   // tetrahedra sizes it (run_global calls ensure_grid).
   if (impl.dim.load(std::memory_order_relaxed) < 3) return;
   const bool grow = impl.verts.size() >= grid_grow_at.load(std::memory_order_relaxed);
+  // Only atomics here: outside the stopped world, another worker may be
+  // replacing the grid.
   const bool follow = !grow && w.walks.long_walks(w.ctx->stats.walk_steps, w.ctx->stats.insertions) &&
-                      impl.grid.grown_since_build(static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
+                      grid_may_grow.load(std::memory_order_relaxed) &&
+                      JumpGrid::grown_since(grid_built_for.load(std::memory_order_relaxed),
+                                            static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
   if (!grow && !follow) return;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too

@@ -145,7 +145,7 @@ struct alignas(64) Worker {
   std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
-  WalkWatch walks;  // this worker's walks since the grid's build (maybe_grow_grid)
+  WalkWatch walks;  // this worker's recent walks (maybe_grow_grid)
   // The batch point this worker took last: its batch (the BatchCallback's
   // address, compared only, never read through) and its position + 1. A run
   // that does not go on from there walks from the jump grid, not from
@@ -248,9 +248,14 @@ struct EngineState {
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
-  // Set once a worker's walks stayed long (WalkWatch): from then on the grid
-  // is a tree that follows the vertices, never equal slots (with the world
-  // stopped, by its stopper).
+  // The grid's built_for and whether its slots could grow (below the cap):
+  // what a worker outside the stopped world may read of it (maybe_grow_grid),
+  // set with the grid.
+  std::atomic<std::size_t> grid_built_for{0};
+  std::atomic<bool> grid_may_grow{true};
+  // Set once a worker's walks stayed long (WalkWatch): from then on every
+  // rebuild cuts the crowded slots (build_split), never equal slots alone
+  // (with the world stopped, by its stopper).
   bool grid_follows = false;
   // The change hook, and the wrapper the kernel calls (it catches).
   ChangeHook user_hook;
@@ -337,7 +342,7 @@ struct EngineState {
   // -- the jump grid's growth, with the world stopped ---------------------------------
   // With the world stopped (parallel: in the arena, whose other workers are
   // suspended), or before workers run.
-  // follow: now, and as a tree from now on (a worker's walks stayed long).
+  // follow: now, and cut where crowded from now on (a worker's walks stayed long).
   void ensure_grid(bool parallel = false, bool follow = false);
   void maybe_grow_grid(Worker& w);
 };

@@ -75,7 +75,37 @@ VertexId JumpGrid::lookup(const KPoint& p) const {
   return no_vertex;
 }
 
-JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, bool even_floor, std::size_t most) {
+bool JumpGrid::check() const {
+  // Every node but the root is some inner node's child once, the leaves'
+  // slots tile [0, slot_count), and no path is deeper than max_depth.
+  std::vector<int> parents(node_count, 0), depth(node_count, 1);
+  std::vector<std::uint32_t> leaf_slots;
+  for (std::size_t i = 0; i < node_count; ++i) {
+    const Node& node = nodes[i];
+    if (node.k() < 1) return false;
+    const std::uint64_t cells = std::uint64_t{node.k()} * node.k() * node.k();
+    for (std::uint64_t j = 0; j < cells; ++j) {
+      const std::uint64_t at = node.first + j;
+      if (node.leaf()) {
+        leaf_slots.push_back(static_cast<std::uint32_t>(at));
+      } else {
+        if (at <= i || at >= node_count) return false;  // children come after their parent
+        ++parents[at];
+        depth[at] = depth[i] + 1;
+        if (depth[at] > max_depth) return false;
+      }
+    }
+  }
+  if (node_count == 0 || parents[0] != 0) return false;
+  for (std::size_t i = 1; i < node_count; ++i)
+    if (parents[i] != 1) return false;
+  std::sort(leaf_slots.begin(), leaf_slots.end());
+  for (std::size_t s = 0; s < leaf_slots.size(); ++s)
+    if (leaf_slots[s] != s) return false;
+  return leaf_slots.size() == slot_count;
+}
+
+JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {
   BoundingBox box;
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
@@ -128,12 +158,6 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
     JumpGrid g;
     const bool root_leaf = is_leaf(n, 0);
     g.lattice = BoxLattice(box.lo, box.hi, static_cast<int>(root_leaf ? leaf_k(n) : inner_k(n)));
-    // even_floor: the root's leaves are cut at least as finely as the
-    // vertices spread evenly over the box would cut them (a child the build
-    // finds empty may fill later).
-    const double root_cells = std::pow(static_cast<double>(g.lattice.res), 3);
-    const double floor_k =
-        even_floor && !last ? std::max(1.0, std::round(std::cbrt(static_cast<double>(n) / root_cells / per_slot))) : 1.0;
     // Breadth first, so that a node's children are consecutive; queue[i]
     // describes node i.
     nodes.clear(false);
@@ -145,9 +169,7 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
       const Pending at = queue[q];
       const std::size_t c = at.end - at.begin;
       const bool leaf = q == 0 ? root_leaf : is_leaf(c, at.depth);
-      const auto k = static_cast<std::uint32_t>(q == 0   ? g.lattice.res
-                                                : leaf   ? std::max(leaf_k(c), at.depth == 1 ? floor_k : 1.0)
-                                                         : inner_k(c));
+      const auto k = static_cast<std::uint32_t>(q == 0 ? g.lattice.res : leaf ? leaf_k(c) : inner_k(c));
       const std::uint32_t cells = k * k * k;
       if (leaf) {
         nodes[q] = {static_cast<std::uint32_t>(total), k | leaf_bit};
@@ -184,9 +206,8 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
       for (std::size_t i = at.begin; i < at.end; ++i) ids2[at.begin + offsets[child[i]]++] = ids[i];
       for (std::size_t i = at.begin; i < at.end; ++i) ids[i] = ids2[i];
     }
-    const std::size_t limit = std::min<std::size_t>(std::max(want, most), std::size_t{1} << 30);
-    if (total > limit && !last) {
-      per_slot *= 1.25 * static_cast<double>(total) / static_cast<double>(limit);
+    if (total > want && !last) {
+      per_slot *= 1.25 * static_cast<double>(total) / static_cast<double>(want);
       continue;
     }
     g.node_count = nodes.size();
@@ -198,38 +219,21 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots,
     for (VertexId v = 1; v < bound; ++v)
       if (verts[v].multiplicity > 0) g.set(g.slot_of(verts[v].p), v);
     g.built_for = n;
-#ifndef NDEBUG
-    // The invariant: every node but the root is some inner node's child once,
-    // and the leaves' slots tile [0, slot_count).
-    std::vector<int> parents(g.node_count, 0);
-    std::vector<std::uint32_t> leaf_slots;
-    for (std::size_t i = 0; i < g.node_count; ++i) {
-      const Node& node = g.nodes[i];
-      assert(node.k() >= 1);
-      const std::uint32_t cells = node.k() * node.k() * node.k();
-      if (node.leaf()) {
-        for (std::uint32_t j = 0; j < cells; ++j) leaf_slots.push_back(node.first + j);
-      } else {
-        for (std::uint32_t j = 0; j < cells; ++j) ++parents[node.first + j];
-      }
-    }
-    assert(parents[0] == 0);
-    for (std::size_t i = 1; i < g.node_count; ++i) assert(parents[i] == 1);
-    std::sort(leaf_slots.begin(), leaf_slots.end());
-    for (std::size_t s = 0; s < leaf_slots.size(); ++s) assert(leaf_slots[s] == s);
-    assert(leaf_slots.size() == g.slot_count);
-#endif
+    assert(g.check());
     return g;
   }
 }
 
-JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
+namespace {
+
+// The live vertices' count and bounding box (in the current arena, isolated,
+// when parallel).
+struct Extent {
+  BoundingBox box;
+  std::size_t n = 0;
+};
+Extent live_extent(const StableArray<VertexRec>& verts, bool parallel) {
   const std::size_t bound = verts.size();
-  struct Extent {
-    BoundingBox box;
-    std::size_t n = 0;
-  };
-  // Over ids [begin, end): what a pass adds up, and the slot each live vertex marks.
   auto extent_of = [&](std::size_t begin, std::size_t end) {
     Extent e;
     for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
@@ -248,16 +252,21 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
     }
     return a;
   };
+  if (!parallel) return extent_of(0, bound);
+  tbb::task_group_context own(tbb::task_group_context::isolated);  // for_range.hpp says why
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, bound, 1 << 14), Extent{},
+      [&](const tbb::blocked_range<std::size_t>& r, Extent acc) { return join(acc, extent_of(r.begin(), r.end())); },
+      join, own);
+}
+
+}  // namespace
+
+JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
+  const std::size_t bound = verts.size();
   JumpGrid g;
   auto run = [&] {
-    tbb::task_group_context own(tbb::task_group_context::isolated);  // for_range.hpp says why
-    const Extent e = parallel ? tbb::parallel_reduce(
-                                    tbb::blocked_range<std::size_t>(0, bound, 1 << 14), Extent{},
-                                    [&](const tbb::blocked_range<std::size_t>& r, Extent acc) {
-                                      return join(acc, extent_of(r.begin(), r.end()));
-                                    },
-                                    join, own)
-                              : extent_of(0, bound);
+    const Extent e = live_extent(verts, parallel);
     const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
     const auto k = static_cast<std::uint32_t>(g.lattice.res);
@@ -292,15 +301,131 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
         }
       }
     });
+    // Crowded: 8 times the mean load, and more than crowded_slot (a grid at
+    // its cap holds more than 2 vertices per slot everywhere).
+    const double crowded_load = std::max<double>(crowded_slot, 8.0 * static_cast<double>(e.n) / static_cast<double>(g.slot_count));
     std::atomic<std::size_t> crowded{0};
     for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
       std::size_t here = 0;
       for (std::size_t s = begin; s < end; ++s)
-        if (counts[s] > crowded_slot) here += counts[s];
+        if (counts[s] > crowded_load) here += counts[s];
       crowded.fetch_add(here, std::memory_order_relaxed);
     });
     g.built_for = e.n;
     g.crowded = crowded.load(std::memory_order_relaxed);
+  };
+  if (parallel)
+    tbb::this_task_arena::isolate(run);
+  else
+    run();
+  return g;
+}
+
+JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t slots, std::size_t most,
+                               bool parallel) {
+  const std::size_t bound = verts.size();
+  JumpGrid g;
+  auto run = [&] {
+    const Extent e = live_extent(verts, parallel);
+    const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
+    const std::size_t limit = std::min<std::size_t>(std::max(want, most), std::size_t{1} << 30);
+    g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
+    const auto k0 = static_cast<std::uint32_t>(g.lattice.res);
+    const std::size_t roots = std::size_t{k0} * k0 * k0;
+    // Scratch mapped for the build and unmapped after it (as in build): the
+    // nodes (the root, then children after their parent; every leaf holds one
+    // slot, the split ones' slots going to their first child, so the slots
+    // never exceed the limit and the nodes twice that), each node's depth and
+    // its vertices counted in the round that made it, each vertex's leaf.
+    StableArray<Node> nodes(2 * std::max(limit, roots) + 2);
+    StableArray<std::uint8_t> depth(2 * std::max(limit, roots) + 2);
+    StableArray<std::uint32_t> count(2 * std::max(limit, roots) + 2);
+    StableArray<std::uint32_t> leaf_of(bound + 1);
+    nodes.grow(1 + roots, false);
+    depth.grow(1 + roots, false);
+    count.grow(1 + roots, false);  // zeros
+    leaf_of.grow(bound, false);    // zeros: no leaf yet (node 0 is the root, never a leaf)
+    nodes[0] = {1, k0};
+    for (std::size_t i = 0; i < roots; ++i) {
+      nodes[1 + i] = {static_cast<std::uint32_t>(i), 1 | leaf_bit};
+      depth[1 + i] = 2;
+    }
+    std::size_t slot_total = roots;
+    // The leaf holding p: slot_of's arithmetic, so the grid's slot_of(p) ends there.
+    auto leaf_node = [&](const KPoint& p) {
+      const double c[3] = {p.x(), p.y(), p.z()};
+      double f[3];
+      for (int a = 0; a < 3; ++a) f[a] = g.lattice.position(a, c[a]) / g.lattice.res;
+      std::uint32_t n = 0;
+      while (!nodes[n].leaf()) {
+        const std::uint32_t k = nodes[n].k();
+        const int x = sub_index(f[0], k), y = sub_index(f[1], k), z = sub_index(f[2], k);
+        n = nodes[n].first + (static_cast<std::uint32_t>(z) * k + y) * k + x;
+      }
+      return n;
+    };
+    std::size_t round_begin = 1, round_end = 1 + roots;  // the leaves the last round made
+    for (;;) {
+      // Each vertex whose leaf was cut (or that has none yet) finds its new
+      // leaf, which counts it.
+      for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
+          if (verts[v].multiplicity == 0) continue;
+          if (leaf_of[v] != 0 && nodes[leaf_of[v]].leaf()) continue;
+          const std::uint32_t at = leaf_node(verts[v].p);
+          leaf_of[v] = at;
+          if (parallel)
+            std::atomic_ref<std::uint32_t>(count[at]).fetch_add(1, std::memory_order_relaxed);
+          else
+            ++count[at];
+        }
+      });
+      // Cut the last round's crowded leaves, in node order, while the slots
+      // fit the limit.
+      const std::size_t next_begin = nodes.size();
+      for (std::size_t i = round_begin; i < round_end; ++i) {
+        if (count[i] <= split_slot || depth[i] >= max_depth) continue;
+        // About 16 per child if they spread over the leaf (cut again if so,
+        // 8 ways): a cluster far smaller than the leaf falls into one child,
+        // and each cut spends few slots on the empty ones.
+        const auto k = static_cast<std::uint32_t>(
+            std::clamp(std::round(std::cbrt(static_cast<double>(count[i]) / 16.0)), 2.0, 64.0));
+        const std::size_t cells = std::size_t{k} * k * k;
+        if (slot_total + cells - 1 > limit) continue;
+        const std::size_t first = nodes.grow(cells, false);
+        depth.grow(cells, false);
+        count.grow(cells, false);
+        for (std::size_t j = 0; j < cells; ++j) {
+          nodes[first + j] = {j == 0 ? nodes[i].first : static_cast<std::uint32_t>(slot_total++), 1 | leaf_bit};
+          depth[first + j] = static_cast<std::uint8_t>(depth[i] + 1);
+        }
+        nodes[i] = {static_cast<std::uint32_t>(first), k};
+      }
+      if (nodes.size() == next_begin) break;  // no leaf cut: every vertex's leaf is final
+      round_begin = next_begin;
+      round_end = nodes.size();
+    }
+    g.node_count = nodes.size();
+    g.nodes = std::make_unique<Node[]>(g.node_count);
+    for (std::size_t i = 0; i < g.node_count; ++i) g.nodes[i] = nodes[i];
+    g.slot_count = slot_total;
+    g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
+    for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
+    });
+    // Each slot keeps its largest id, as in build_equal.
+    for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
+      for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
+        if (verts[v].multiplicity == 0) continue;
+        std::atomic<VertexId>& slot = g.slots[nodes[leaf_of[v]].first];
+        VertexId now = slot.load(std::memory_order_relaxed);
+        while ((now == no_vertex || now < v) &&
+               !slot.compare_exchange_weak(now, static_cast<VertexId>(v), std::memory_order_relaxed)) {
+        }
+      }
+    });
+    g.built_for = e.n;
+    assert(g.check());
   };
   if (parallel)
     tbb::this_task_arena::isolate(run);

@@ -14,16 +14,16 @@
 // are, and walks that many cells longer. For uniform points the tree is two
 // levels: the root's grid, and leaves of 1, 8 or 27 slots (mostly 8). The
 // engine builds only the root, as equal slots, unless the equal slots are
-// crowded (a cluster): then a tree whose leaves under the root are cut at
-// least as finely as equal slots would be (see grid_rebuild).
+// crowded (a cluster): then the crowded ones are cut again where the
+// vertices are (build_split; see grid_rebuild).
 //
 // Encoding: nodes[i] = {first, k | leaf_bit}: an inner node's children are
 // nodes [first, first + k^3), a leaf's slots are slots [first, first + k^3);
 // child or slot (x, y, z) of a node is at first + (z * k + y) * k + x. Node 0
 // is the root, cut res x res x res by `lattice` over the bounding box.
-// Invariant (checked in debug builds by build): k >= 1; every node but the
-// root is the child of exactly one inner node; the leaves' slot ranges tile
-// [0, slot_count); depth <= max_depth.
+// Invariant (check(), asserted after build and build_split): k >= 1; every
+// node but the root is the child of exactly one inner node, numbered after
+// it; the leaves' slot ranges tile [0, slot_count); depth <= max_depth.
 //
 // Slots are relaxed atomics: a slot may name a vertex that has since died or
 // been recycled, so a reader checks the vertex (under its lock, in the engine)
@@ -59,7 +59,8 @@ struct JumpGrid {
   std::size_t slot_count = 0;  // 0: no grid
   std::size_t built_for = 0;   // live vertices when it was built
   // build_equal: the live vertices in slots holding more than crowded_slot
-  // of them when it was built (equal slots serve a cluster badly); 0 for build's.
+  // of them, and 8 times the mean, when it was built (equal slots serve a
+  // cluster badly); 0 for the other builds.
   static constexpr std::uint32_t crowded_slot = 16;
   std::size_t crowded = 0;
 
@@ -120,13 +121,7 @@ struct JumpGrid {
   // slots when given (and about that many when the vertices are spread
   // evenly), else about 2 vertices per slot. Counts the vertices itself (the
   // triangulation's totals lag while engine workers hold deltas).
-  // even_floor: the root's children are cut at least as finely as for
-  // vertices spread evenly over the box, where the build finds few (for an
-  // engine whose equal slots are crowded: see build_equal). most: the slots
-  // it may take (at least `slots`; the floor comes on top of where the
-  // vertices are).
-  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0, bool even_floor = false,
-                        std::size_t most = 0);
+  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0);
   // One level of equal slots over the same box, as many as fit in `slots`
   // (about n / 2 when 0): for the engine, whose workers fill the domain
   // block by block, so that the vertices at a rebuild say little about where
@@ -136,13 +131,28 @@ struct JumpGrid {
   // with the world stopped, its other workers suspended and their threads
   // free); the same grid either way.
   static JumpGrid build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel);
+  // For an engine whose equal slots are crowded (a cluster): the same equal
+  // slots as build_equal's, each a leaf of one slot, and then, round after
+  // round, each leaf made in the last round that holds more than split_slot
+  // vertices cut into k^3 leaves (about 16 vertices each if they spread over
+  // it, so cut again, 8 ways), while the slots stay within `most` (at least
+  // `slots`). Every round is a pass over the
+  // vertices (in parallel when asked, as build_equal), so it costs about
+  // build_equal's time per level the clusters need, where build's tree is
+  // built on one thread; the same grid either way.
+  static constexpr std::uint32_t split_slot = 8;
+  static JumpGrid build_split(const StableArray<VertexRec>& verts, std::size_t slots, std::size_t most, bool parallel);
   // Bytes it holds.
   std::size_t bytes() const { return slot_count * sizeof(VertexId) + node_count * sizeof(Node); }
   // Whether a rebuild before the vertex count doubles may pay (WalkWatch):
-  // a quarter more live vertices than it was built for.
-  bool grown_since_build(std::size_t live) const {
-    return slot_count != 0 && live >= built_for + std::max<std::size_t>(1024, built_for / 4);
+  // a quarter more live vertices than a grid built for `built_for` of them.
+  static bool grown_since(std::size_t built_for, std::size_t live) {
+    return live >= built_for + std::max<std::size_t>(1024, built_for / 4);
   }
+  bool grown_since_build(std::size_t live) const { return slot_count != 0 && grown_since(built_for, live); }
+
+  // The encoding's invariant (above), and depth <= max_depth.
+  bool check() const;
 
  private:
   // A filled slot of node n's subtree, reading at most `budget` slots.
@@ -152,10 +162,11 @@ struct JumpGrid {
 // Walks that stay long after a build say the vertices have moved since (a
 // region filled after it: a cluster, a zone a refiner refines, the blocks one
 // worker serves in turn), and the grid is rebuilt then instead of when the
-// vertex count doubles (JumpGrid::grown_since_build bounds how often). One per
+// vertex count doubles (JumpGrid::grown_since bounds how often). One per
 // context that inserts (its stats): long_walks looks once per `window`
-// insertions. Invariant: steps and insertions never exceed the counts last
-// looked at (a count found smaller restarts the watch).
+// insertions, at the walks since its last look (an engine's rolled-back
+// walks included). Invariant: steps and insertions are counts it has seen,
+// so never above the context's (a count found smaller restarts the watch).
 struct WalkWatch {
   static constexpr std::uint64_t window = 1024;   // insertions between two looks
   static constexpr std::uint64_t long_walk = 20;  // steps per insertion that are long (uniform points: 6-7)

@@ -303,26 +303,24 @@ void Triangulation::Impl::grid_rebuild(std::size_t slots, bool parallel, std::si
   // unless 40% of them crowd a few of its slots (a cluster far smaller than
   // the box: walks from there grow with it, 105 steps per insertion for two
   // clusters of side 1e-4 at 200k points), or the engine's walks said the
-  // equal slots serve badly (follow). Then a tree, cut where they are and at
-  // least as finely as the equal slots elsewhere (built on this thread), in
-  // at most twice the slots. (Normal points crowd 30-36%: their walks are 8
-  // steps instead of 6 on equal slots, and the tree's build on one thread,
-  // the other workers stopped, cost more than that saved, 3-6%; line points
-  // crowd 45%, Kuzmin's 70%, and gain 11-16%.)
+  // equal slots serve badly (follow). Then the same equal slots with the
+  // crowded ones cut again where the vertices are (build_split), in at most
+  // twice the slots. (Normal points crowd 30-38%: their walks are 8 steps
+  // instead of 6 on equal slots, and the cut grid's build, the other workers
+  // stopped, cost more than that saved, 2-3%; line points crowd 45-49%,
+  // Kuzmin's 70%, and gain 11-20%.)
   if (grid_growth == GridGrowth::kernel) {
     grid = detail::JumpGrid::build(verts, slots);
     return;
   }
-  const std::size_t limit = std::min(2 * slots, most ? most : 2 * slots);
-  if (follow) {
-    grid = detail::JumpGrid::build(verts, slots, true, limit);
-    return;
+  if (!follow) {
+    detail::JumpGrid equal = detail::JumpGrid::build_equal(verts, slots, parallel);
+    if (5 * equal.crowded <= 2 * equal.built_for) {
+      grid = std::move(equal);
+      return;
+    }
   }
-  detail::JumpGrid equal = detail::JumpGrid::build_equal(verts, slots, parallel);
-  if (5 * equal.crowded > 2 * equal.built_for)
-    grid = detail::JumpGrid::build(verts, slots, true, limit);
-  else
-    grid = std::move(equal);
+  grid = detail::JumpGrid::build_split(verts, slots, std::min(2 * slots, most ? most : 2 * slots), parallel);
 }
 
 }  // namespace pdt

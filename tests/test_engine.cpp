@@ -1199,19 +1199,42 @@ TEST_CASE("engine: drain() from the engine's own callback is refused, not a dead
 }
 
 TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots", "[engine]") {
-  const std::vector<Point3> pts = random_points(scaled(20000, 8000), 94);
-  for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}}) {
-    pdt::Triangulation t;
+  // Inserts points one at a time with a grid of at most `cap` slots.
+  auto run = [](pdt::Triangulation& t, const std::vector<Point3>& points, std::size_t cap) {
     pdt::EngineOptions o = options_with(2);
     o.grid_slots = cap;
     tbb::task_arena arena(2);
     arena.execute([&] {
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
       ErrorSink errors;
-      for (const auto& p : pts) e.insert(p, errors.callback());
+      for (const auto& p : points) e.insert(p, errors.callback());
       e.drain();
       errors.require_none();
     });
+  };
+  // Clustered points take the cut grid (build_split), within the cap too.
+  pdt::GenerateOptions clustered;
+  clustered.points = scaled(20000, 8000);
+  clustered.dist = pdt::Distribution::clusters;
+  std::vector<Point3> cpts{{0, 0, 0}, {1, 1, 1}};
+  for (const pdt::Operation& op : pdt::generate(clustered).ops) cpts.push_back(op.point);
+  for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}, std::size_t{1}}) {
+    pdt::Triangulation t;
+    run(t, cpts, cap);
+    const auto& grid = pdt::detail::impl_of(t).grid;
+    INFO("clustered points, cap " << cap << ", slots " << grid.slot_count << ", nodes " << grid.node_count);
+    REQUIRE(grid.slot_count <= cap);
+    REQUIRE(grid.check());
+    if (cap > cpts.size()) {
+      REQUIRE(grid.node_count > 1);  // cut where the clusters are
+      CHECK(double(t.stats().walk_steps) / double(t.stats().insertions) < 20);
+    }
+    require_valid(t);
+  }
+  const std::vector<Point3> pts = random_points(scaled(20000, 8000), 94);
+  for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}}) {
+    pdt::Triangulation t;
+    run(t, pts, cap);
     const std::size_t slots = pdt::detail::impl_of(t).grid.slot_count;
     INFO("cap " << cap << ", slots " << slots << ", points " << pts.size());
     // Regrown as ids double, at about two vertices per slot: between n/8 and n/2.

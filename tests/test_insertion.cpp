@@ -899,6 +899,20 @@ TEST_CASE("an engine's jump grid follows a cluster far smaller than the box", "[
   INFO("sharing in the cluster " << in_cluster / n_in << ", outside " << outside / n_out << ", slots " << g.slot_count);
   CHECK(in_cluster / static_cast<double>(n_in) < 10);
   CHECK(outside / static_cast<double>(n_out) < 10);
+  // The same grid built on one thread or on four.
+  const auto serial = pdt::detail::JumpGrid::build_split(m.verts, 20000, 40000, false);
+  tbb::task_arena arena(4);
+  const auto parallel =
+      arena.execute([&] { return pdt::detail::JumpGrid::build_split(m.verts, 20000, 40000, true); });
+  REQUIRE(serial.check());
+  REQUIRE(serial.node_count == parallel.node_count);
+  REQUIRE(serial.slot_count == parallel.slot_count);
+  REQUIRE(serial.slot_count <= 40000);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < serial.node_count; ++i)
+    differ += serial.nodes[i].first != parallel.nodes[i].first || serial.nodes[i].k_leaf != parallel.nodes[i].k_leaf;
+  for (std::size_t s = 0; s < serial.slot_count; ++s) differ += serial.get(s) != parallel.get(s);
+  CHECK(differ == 0);
   m.grid_growth = pdt::Triangulation::Impl::GridGrowth::kernel;
   require_valid(t);
 }

@@ -83,6 +83,7 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
   if (impl.grid.slot_count != 0 && 2 * impl.grid.built_for >= static_cast<std::size_t>(impl.n_vertices.load())) {
     grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);
     grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
+    grid_may_grow.store(impl.verts.size() / 2 < std::max<std::size_t>(opts.grid_slots, 1), std::memory_order_relaxed);
   } else {
     ensure_grid();  // built aside: a failure leaves the old grid
   }

@@ -526,12 +526,13 @@ void EngineState::ensure_grid(bool parallel, bool follow) {
   }
   // Over the live vertices' bounding box, about two vertices per slot.
   const std::size_t most = std::max<std::size_t>(opts.grid_slots, 1);
-  impl.grid_rebuild(std::clamp<std::size_t>(ids / 2, 1, most), parallel, most, grid_follows || follow);
+  const std::size_t slots = std::clamp<std::size_t>(ids / 2, 1, most);
+  impl.grid_rebuild(slots, parallel, most, grid_follows || follow);
   if (follow) grid_follows = true;  // after the rebuild: a failed one changes nothing
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
   grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
   // A grid at the cap may not get finer: walks long then are not its age.
-  grid_may_grow.store(impl.grid.slot_count < most / 2, std::memory_order_relaxed);
+  grid_may_grow.store(slots < most, std::memory_order_relaxed);
 }
 
 void EngineState::maybe_grow_grid(Worker& w) {

@@ -248,7 +248,8 @@ struct EngineState {
   // Vertex-id bound at which the jump grid is regrown: each time the vertex
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
-  // The grid's built_for and whether its slots could grow (below the cap):
+  // The grid's built_for and whether its slots could grow (asked for fewer
+  // than the cap):
   // what a worker outside the stopped world may read of it (maybe_grow_grid),
   // set with the grid.
   std::atomic<std::size_t> grid_built_for{0};

@@ -365,6 +365,9 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
       return n;
     };
     std::size_t round_begin = 1, round_end = 1 + roots;  // the leaves the last round made
+    // A leaf is cut when it holds more than split_slot vertices and 4 times
+    // the mean load (above 2 per slot when the cap binds).
+    const double cut_above = std::max<double>(split_slot, 4.0 * static_cast<double>(e.n) / static_cast<double>(roots));
     for (;;) {
       // Each vertex whose leaf was cut (or that has none yet) finds its new
       // leaf, which counts it.
@@ -384,12 +387,13 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
       // fit the limit.
       const std::size_t next_begin = nodes.size();
       for (std::size_t i = round_begin; i < round_end; ++i) {
-        if (count[i] <= split_slot || depth[i] >= max_depth) continue;
+        if (count[i] <= cut_above || depth[i] >= max_depth) continue;
         // About 16 per child if they spread over the leaf (cut again if so,
         // 8 ways): a cluster far smaller than the leaf falls into one child,
         // and each cut spends few slots on the empty ones.
-        const auto k = static_cast<std::uint32_t>(
+        auto k = static_cast<std::uint32_t>(
             std::clamp(std::round(std::cbrt(static_cast<double>(count[i]) / 16.0)), 2.0, 64.0));
+        while (k > 2 && slot_total + std::size_t{k} * k * k - 1 > limit) --k;  // what fits
         const std::size_t cells = std::size_t{k} * k * k;
         if (slot_total + cells - 1 > limit) continue;
         const std::size_t first = nodes.grow(cells, false);

@@ -134,8 +134,9 @@ struct JumpGrid {
   // For an engine whose equal slots are crowded (a cluster): the same equal
   // slots as build_equal's, each a leaf of one slot, and then, round after
   // round, each leaf made in the last round that holds more than split_slot
-  // vertices cut into k^3 leaves (about 16 vertices each if they spread over
-  // it, so cut again, 8 ways), while the slots stay within `most` (at least
+  // vertices (and 4 times the mean load) cut into k^3 leaves (about 16
+  // vertices each if they spread over it, so cut again, 8 ways; k smaller
+  // where that does not fit), while the slots stay within `most` (at least
   // `slots`). Every round is a pass over the
   // vertices (in parallel when asked, as build_equal), so it costs about
   // build_equal's time per level the clusters need, where build's tree is

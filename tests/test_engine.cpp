@@ -1695,7 +1695,7 @@ TEST_CASE("engine: walks stay short in clusters far smaller than the box", "[eng
   // every walk started at the slot's vertex, across its cluster: 65 steps per
   // insertion at 50k points, 104 at 200k, with 1 or 2 workers (the
   // sequential kernel's tree: 7). The rebuilds now see the crowded slots and
-  // build a tree that follows the clusters.
+  // cut the crowded slots again where the clusters are (build_split).
   const std::size_t n = scaled(40000, 10000);
   std::mt19937_64 rng(17);
   std::uniform_real_distribution<double> u(0, 1);

@@ -306,9 +306,10 @@ void Triangulation::Impl::grid_rebuild(std::size_t slots, bool parallel, std::si
   // equal slots serve badly (follow). Then the same equal slots with the
   // crowded ones cut again where the vertices are (build_split), in at most
   // twice the slots. (Normal points crowd 30-38%: their walks are 8 steps
-  // instead of 6 on equal slots, and a finer grid's build, the other workers
-  // stopped, cost more than that saved: 2-3% with the kernel's tree built on
-  // one thread; line points crowd 45-49%, Kuzmin's 70%, and gain 11-15%.)
+  // instead of 6 on equal slots, and a finer grid's rebuilds, the other
+  // workers stopped, cost more than that saved: 3% with this cut grid, 3-6%
+  // with the kernel's tree built on one thread; line points crowd 45-49%,
+  // Kuzmin's 70%, and gain 11-15%.)
   if (grid_growth == GridGrowth::kernel) {
     grid = detail::JumpGrid::build(verts, slots);
     return;

@@ -531,6 +531,7 @@ void EngineState::ensure_grid(bool parallel, bool follow) {
   if (follow) grid_follows = true;  // after the rebuild: a failed one changes nothing
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
   grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
+  if (!follow) grid_doublings.fetch_add(1, std::memory_order_relaxed);  // re-arms the workers' watches
   // A grid at the cap may not get finer: walks long then are not its age.
   grid_may_grow.store(slots < most, std::memory_order_relaxed);
 }
@@ -542,10 +543,12 @@ void EngineState::maybe_grow_grid(Worker& w) {
   const bool grow = impl.verts.size() >= grid_grow_at.load(std::memory_order_relaxed);
   // Only atomics here: outside the stopped world, another worker may be
   // replacing the grid.
-  const bool follow = !grow && w.walks.long_walks(w.ctx->stats.walk_steps, w.ctx->stats.insertions) &&
-                      grid_may_grow.load(std::memory_order_relaxed) &&
+  const std::uint32_t doublings = grid_doublings.load(std::memory_order_relaxed);
+  if (w.walks_doublings != doublings) w.walks.rearm(), w.walks_doublings = doublings;
+  const bool follow = !grow && grid_may_grow.load(std::memory_order_relaxed) &&
                       JumpGrid::grown_since(grid_built_for.load(std::memory_order_relaxed),
-                                            static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load())));
+                                            static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()))) &&
+                      w.walks.long_walks(w.ctx->stats.walk_steps, w.ctx->stats.insertions);
   if (!grow && !follow) return;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too

@@ -146,6 +146,7 @@ struct alignas(64) Worker {
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
   WalkWatch walks;  // this worker's recent walks (maybe_grow_grid)
+  std::uint32_t walks_doublings = 0;  // EngineState::grid_doublings when `walks` was last re-armed
   // The batch point this worker took last: its batch (the BatchCallback's
   // address, compared only, never read through) and its position + 1. A run
   // that does not go on from there walks from the jump grid, not from
@@ -254,6 +255,7 @@ struct EngineState {
   // set with the grid.
   std::atomic<std::size_t> grid_built_for{0};
   std::atomic<bool> grid_may_grow{true};
+  std::atomic<std::uint32_t> grid_doublings{0};  // rebuilds as the ids grew (WalkWatch::rearm)
   // Set once a worker's walks stayed long (WalkWatch): from then on every
   // rebuild cuts the crowded slots (build_split), never equal slots alone
   // (with the world stopped, by its stopper).

@@ -166,22 +166,37 @@ struct JumpGrid {
 // vertex count doubles (JumpGrid::grown_since bounds how often). One per
 // context that inserts (its stats): long_walks looks once per `window`
 // insertions, at the walks since its last look (an engine's rolled-back
-// walks included). Invariant: steps and insertions are counts it has seen,
-// so never above the context's (a count found smaller restarts the watch).
+// walks included). A rebuild it asked for that did not halve the walks (points
+// on a sphere, whose cells span the ball, walk 160 steps from any start)
+// disarms it until the next rebuild as the count doubles (rearm): on such a
+// stream the early rebuilds cost the sequential kernel 7%. Invariant: steps
+// and insertions are counts it has seen, so never above the context's (a
+// count found smaller restarts the watch); asked > 0 only while armed.
 struct WalkWatch {
   static constexpr std::uint64_t window = 1024;   // insertions between two looks
   static constexpr std::uint64_t long_walk = 20;  // steps per insertion that are long (uniform points: 6-7)
   std::uint64_t steps = 0, insertions = 0;        // the counts at the last look
+  double asked = 0;                               // the mean walk when it last asked for a rebuild (0: not since rearm)
+  bool armed = true;
+  // Call only when a rebuild may follow (the grid has grown enough).
   bool long_walks(std::uint64_t walk_steps, std::uint64_t inserted) {
     if (inserted < insertions || walk_steps < steps) {
       steps = walk_steps, insertions = inserted;
       return false;
     }
     if (inserted - insertions < window) return false;
-    const bool long_ = walk_steps - steps > long_walk * (inserted - insertions);
+    const double mean = static_cast<double>(walk_steps - steps) / static_cast<double>(inserted - insertions);
     steps = walk_steps, insertions = inserted;
-    return long_;
+    if (!armed || mean <= long_walk) return false;
+    if (asked > 0 && mean > asked / 2) {  // the last rebuild did not help
+      armed = false;
+      asked = 0;
+      return false;
+    }
+    asked = mean;
+    return true;
   }
+  void rearm() { armed = true, asked = 0; }
 };
 
 }  // namespace pdt::detail

@@ -127,9 +127,10 @@ void Triangulation::Impl::grid_note(OpContext& ctx, VertexId v) {
   // grid itself, with the world stopped.
   if (grid_growth == GridGrowth::kernel) {
     const auto live = static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed) + ctx.d_vertices);
-    if (live >= 2 * grid.built_for + 64 ||
-        (!ctx.large_batch && walk_watch.long_walks(ctx.stats.walk_steps, ctx.stats.insertions) &&
-         grid.grown_since_build(live))) {
+    const bool doubled = live >= 2 * grid.built_for + 64;
+    if (doubled || (!ctx.large_batch && grid.grown_since_build(live) &&
+                    walk_watch.long_walks(ctx.stats.walk_steps, ctx.stats.insertions))) {
+      if (doubled) walk_watch.rearm();
       fold_counters(ctx);
       try {
         grid_rebuild();

@@ -250,9 +250,8 @@ struct EngineState {
   // ids double, so it always holds about two vertices per slot.
   std::atomic<std::size_t> grid_grow_at{0};
   // The grid's built_for and whether its slots could grow (asked for fewer
-  // than the cap):
-  // what a worker outside the stopped world may read of it (maybe_grow_grid),
-  // set with the grid.
+  // than the cap): what a worker outside the stopped world may read of it
+  // (maybe_grow_grid), set with the grid.
   std::atomic<std::size_t> grid_built_for{0};
   std::atomic<bool> grid_may_grow{true};
   std::atomic<std::uint32_t> grid_doublings{0};  // rebuilds as the ids grew (WalkWatch::rearm)

@@ -260,6 +260,18 @@ Extent live_extent(const StableArray<VertexRec>& verts, bool parallel) {
       join, own);
 }
 
+// A slot keeps the largest id it is offered: one thread going up the ids
+// stores each; pieces in parallel keep the larger, whichever comes first.
+void keep_largest(std::atomic<VertexId>& slot, VertexId v, bool parallel) {
+  if (!parallel) {
+    slot.store(v, std::memory_order_relaxed);
+    return;
+  }
+  VertexId now = slot.load(std::memory_order_relaxed);
+  while ((now == no_vertex || now < v) && !slot.compare_exchange_weak(now, v, std::memory_order_relaxed)) {
+  }
+}
+
 }  // namespace
 
 JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
@@ -288,17 +300,11 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
       for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
         if (verts[v].multiplicity == 0) continue;
         const std::size_t s = g.slot_of(verts[v].p);
-        std::atomic<VertexId>& slot = g.slots[s];
-        if (!parallel) {
-          slot.store(static_cast<VertexId>(v), std::memory_order_relaxed);
+        keep_largest(g.slots[s], static_cast<VertexId>(v), parallel);
+        if (parallel)
+          std::atomic_ref<std::uint32_t>(counts[s]).fetch_add(1, std::memory_order_relaxed);
+        else
           ++counts[s];
-          continue;
-        }
-        std::atomic_ref<std::uint32_t>(counts[s]).fetch_add(1, std::memory_order_relaxed);
-        VertexId now = slot.load(std::memory_order_relaxed);
-        while ((now == no_vertex || now < v) &&
-               !slot.compare_exchange_weak(now, static_cast<VertexId>(v), std::memory_order_relaxed)) {
-        }
       }
     });
     // Crowded: 8 times the mean load, and more than crowded_slot (a grid at
@@ -421,11 +427,7 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
     for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
         if (verts[v].multiplicity == 0) continue;
-        std::atomic<VertexId>& slot = g.slots[nodes[leaf_of[v]].first];
-        VertexId now = slot.load(std::memory_order_relaxed);
-        while ((now == no_vertex || now < v) &&
-               !slot.compare_exchange_weak(now, static_cast<VertexId>(v), std::memory_order_relaxed)) {
-        }
+        keep_largest(g.slots[nodes[leaf_of[v]].first], static_cast<VertexId>(v), parallel);
       }
     });
     g.built_for = e.n;

@@ -12,6 +12,7 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 
 #include "pdt/geometry.hpp"
@@ -31,14 +32,67 @@ inline int orient(const KPoint& a, const KPoint& b, const KPoint& c, const KPoin
 
 // The tests below, with an epsilon from a BoxFilter (box_filter.hpp, where
 // the bound is argued) for a box holding all their points: CGAL's
-// determinant, in CGAL's order, decides when it is beyond eps; otherwise (and
-// for eps = infinity: no box) CGAL's predicate does, out of line so that the
-// filtered forms stay small enough to inline.
+// determinant, in CGAL's order, decides when it is beyond eps. Otherwise
+// (points close together in a large box, e.g. inside a cluster) the same
+// determinant goes on to CGAL's own semi-static bound, computed from the
+// call's coordinate differences exactly as CGAL's static filter computes it
+// (Static_filters/Orientation_3.h, Side_of_oriented_sphere_3.h): what CGAL
+// would decide there, without evaluating the determinant again. Only when
+// that bound does not decide either (and for eps = infinity: no box) does
+// CGAL's predicate run whole (its static filter again, then interval, then
+// exact arithmetic). Out of line, so that the filtered forms stay small
+// enough to inline.
 [[gnu::noinline]] inline int orient_out_of_line(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s) {
   return orient(p, q, r, s);
 }
 [[gnu::noinline]] inline int side_of_sphere_out_of_line(const KPoint& p, const KPoint& q, const KPoint& r,
                                                         const KPoint& s, const KPoint& t) {
+  return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
+}
+
+// Sorts three non-negative maxima so that lo <= mid <= hi, as CGAL's static
+// filters do before their range checks.
+inline void sort3(double& lo, double& mid, double& hi) {
+  if (lo > hi) std::swap(lo, hi);
+  if (mid > hi)
+    std::swap(mid, hi);
+  else if (mid < lo)
+    std::swap(lo, mid);
+}
+
+// CGAL::orientation(p, q, r, s), given det: CGAL's determinant of the
+// differences from p (bitwise CGAL's: the same operations in the same order).
+[[gnu::noinline]] inline int orient_semi_static(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s,
+                                                double det) {
+  double mx = std::max({std::abs(q.x() - p.x()), std::abs(r.x() - p.x()), std::abs(s.x() - p.x())});
+  double my = std::max({std::abs(q.y() - p.y()), std::abs(r.y() - p.y()), std::abs(s.y() - p.y())});
+  double mz = std::max({std::abs(q.z() - p.z()), std::abs(r.z() - p.z()), std::abs(s.z() - p.z())});
+  const double eps = 5.1107127829973299e-15 * mx * my * mz;
+  sort3(mx, my, mz);
+  if (mx >= 1e-97 && mz < 1e102) {  // CGAL's underflow and overflow guards
+    if (det > eps) return 1;
+    if (det < -eps) return -1;
+  }
+  return orient(p, q, r, s);
+}
+
+// CGAL::side_of_oriented_sphere(p, q, r, s, t), given det: CGAL's
+// determinant of the differences from t (bitwise CGAL's, as above).
+[[gnu::noinline]] inline int side_of_sphere_semi_static(const KPoint& p, const KPoint& q, const KPoint& r,
+                                                        const KPoint& s, const KPoint& t, double det) {
+  double mx = std::max({std::abs(p.x() - t.x()), std::abs(q.x() - t.x()), std::abs(r.x() - t.x()),
+                        std::abs(s.x() - t.x())});
+  double my = std::max({std::abs(p.y() - t.y()), std::abs(q.y() - t.y()), std::abs(r.y() - t.y()),
+                        std::abs(s.y() - t.y())});
+  double mz = std::max({std::abs(p.z() - t.z()), std::abs(q.z() - t.z()), std::abs(r.z() - t.z()),
+                        std::abs(s.z() - t.z())});
+  double eps = 1.2466136531027298e-13 * mx * my * mz;
+  sort3(mx, my, mz);
+  if (mx >= 1e-58 && mz < 1e61) {  // CGAL's underflow and overflow guards
+    eps *= mz * mz;
+    if (det > eps) return 1;
+    if (det < -eps) return -1;
+  }
   return static_cast<int>(CGAL::side_of_oriented_sphere(p, q, r, s, t));
 }
 
@@ -52,7 +106,7 @@ inline int filtered_orient(const KPoint& p, const KPoint& q, const KPoint& r, co
   const double det = CGAL::determinant(pqx, pqy, pqz, prx, pry, prz, psx, psy, psz);
   if (det > eps) return 1;
   if (det < -eps) return -1;
-  return orient_out_of_line(p, q, r, s);
+  return orient_semi_static(p, q, r, s, det);
 }
 
 // CGAL::side_of_oriented_sphere(p, q, r, s, t).
@@ -73,7 +127,7 @@ inline int filtered_side_of_sphere(const KPoint& p, const KPoint& q, const KPoin
       CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
   if (det > eps) return 1;
   if (det < -eps) return -1;
-  return side_of_sphere_out_of_line(p, q, r, s, t);
+  return side_of_sphere_semi_static(p, q, r, s, t, det);
 }
 
 inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xyz(*a, *b) == CGAL::SMALLER; }

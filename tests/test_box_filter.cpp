@@ -154,6 +154,53 @@ TEST_CASE("box filter: the sign is CGAL's for elongated boxes and tiny clusters 
   SUCCEED(counts.tests << " tests");
 }
 
+TEST_CASE("box filter: tests inside a cluster, which the box cannot decide, get CGAL's semi-static bound") {
+  // A cluster of extent s inside a box of extent 1: its determinants (s^3,
+  // s^5) are far below the box's epsilon, so the box decides none of them and
+  // CGAL's own bound, from the call's differences, decides with the same
+  // determinant (predicates.hpp: orient_semi_static, side_of_sphere_semi_static).
+  // Uniform points in the cluster, lattice ties in it, and one ulp off them,
+  // where only interval or exact arithmetic decides.
+  std::mt19937_64 rng(19);
+  long nonzero = 0, zero = 0;
+  for (double s : {1e-2, 1e-5, 1e-9, 1e-40, 1e-70})
+    for (double at : {0.3, -7.0, 1e6}) {
+      const double lo[3] = {at, 0.5 * at, -at};
+      const double e[3] = {s, s, s};
+      std::vector<std::vector<KPoint>> sets = {uniform(rng, 48, lo, e)};
+      std::vector<KPoint> ties;
+      for (const KPoint& p : lattice(rng, 48, 0, s / 3)) ties.emplace_back(at + p.x(), 0.5 * at + p.y(), -at + p.z());
+      sets.push_back(ties);
+      for (KPoint& p : ties)
+        if (rng() % 2) p = KPoint(std::nextafter(p.x(), inf), p.y(), std::nextafter(p.z(), -inf));
+      sets.push_back(ties);
+      for (std::vector<KPoint>& pts : sets) {
+        BoxFilter f;
+        f.extend(KPoint(at - 0.5, 0.5 * at - 0.5, -at - 0.5));  // the box: extent 1 around the cluster
+        f.extend(KPoint(at + 0.5, 0.5 * at + 0.5, -at + 0.5));
+        for (const KPoint& p : pts) REQUIRE(f.contains(p));
+        const FilterEps fe = f.eps();
+        for (int g = 0; g < 600; ++g) {
+          const KPoint& a = pts[rng() % pts.size()];
+          const KPoint& b = pts[rng() % pts.size()];
+          const KPoint& c = pts[rng() % pts.size()];
+          const KPoint& d = pts[rng() % pts.size()];
+          const KPoint& q = pts[rng() % pts.size()];
+          INFO("cluster of extent " << s << " at " << at << ": " << a << " | " << b << " | " << c << " | " << d
+                                    << " | " << q);
+          const int o = static_cast<int>(CGAL::orientation(a, b, c, d));
+          REQUIRE(pdt::detail::filtered_orient(a, b, c, d, fe.orient) == o);
+          const int sp = static_cast<int>(CGAL::side_of_oriented_sphere(a, b, c, d, q));
+          REQUIRE(pdt::detail::filtered_side_of_sphere(a, b, c, d, q, fe.insphere) == sp);
+          (sp != 0 ? nonzero : zero) += 1;
+        }
+      }
+    }
+  // Both kinds occurred: signs the bound decides and exact ties it must not.
+  CHECK(nonzero > 1000);
+  CHECK(zero > 100);
+}
+
 TEST_CASE("box filter: the sign is CGAL's on exact ties (lattice points) and one ulp from them") {
   std::mt19937_64 rng(13);
   Counts counts;

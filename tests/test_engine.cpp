@@ -1199,20 +1199,31 @@ TEST_CASE("engine: drain() from the engine's own callback is refused, not a dead
 }
 
 TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots", "[engine]") {
-  // Inserts points one at a time with a grid of at most `cap` slots.
-  auto run = [](pdt::Triangulation& t, const std::vector<Point3>& points, std::size_t cap) {
+  // Inserts points one at a time with a grid of at most `cap` slots,
+  // draining after every `drain_every` of them (0: once, at the end).
+  auto run = [](pdt::Triangulation& t, const std::vector<Point3>& points, std::size_t cap,
+                std::size_t drain_every = 0) {
     pdt::EngineOptions o = options_with(2);
     o.grid_slots = cap;
     tbb::task_arena arena(2);
     arena.execute([&] {
       pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
       ErrorSink errors;
-      for (const auto& p : points) e.insert(p, errors.callback());
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        e.insert(points[i], errors.callback());
+        if (drain_every != 0 && (i + 1) % drain_every == 0) e.drain();
+      }
       e.drain();
       errors.require_none();
     });
   };
   // Clustered points take the cut grid (build_split), within the cap too.
+  // Drained every 512 points, so that each regrowth sees a prefix of the
+  // stream, half of it in the clusters: without the drains, which vertices
+  // are live at a regrowth depends on the order the workers served the
+  // blocks (under TSan the clusters' blocks could still be queued, the grid
+  // then built of equal slots, and whether the walk watch cuts it later
+  // depends on the walks each worker saw).
   pdt::GenerateOptions clustered;
   clustered.points = scaled(20000, 8000);
   clustered.dist = pdt::Distribution::clusters;
@@ -1220,7 +1231,7 @@ TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots",
   for (const pdt::Operation& op : pdt::generate(clustered).ops) cpts.push_back(op.point);
   for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}, std::size_t{1}}) {
     pdt::Triangulation t;
-    run(t, cpts, cap);
+    run(t, cpts, cap, 512);
     const auto& grid = pdt::detail::impl_of(t).grid;
     INFO("clustered points, cap " << cap << ", slots " << grid.slot_count << ", nodes " << grid.node_count);
     REQUIRE(grid.slot_count <= cap);

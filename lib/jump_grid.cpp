@@ -79,7 +79,8 @@ bool JumpGrid::check() const {
   // Every node but the root is some inner node's child once, the leaves'
   // slots tile [0, slot_count), and no path is deeper than max_depth.
   std::vector<int> parents(node_count, 0), depth(node_count, 1);
-  std::vector<std::uint32_t> leaf_slots;
+  std::vector<bool> slot_seen(slot_count, false);  // a bit per slot: each covered once
+  std::size_t leaf_slots = 0;
   for (std::size_t i = 0; i < node_count; ++i) {
     const Node& node = nodes[i];
     if (node.k() < 1) return false;
@@ -87,7 +88,9 @@ bool JumpGrid::check() const {
     for (std::uint64_t j = 0; j < cells; ++j) {
       const std::uint64_t at = node.first + j;
       if (node.leaf()) {
-        leaf_slots.push_back(static_cast<std::uint32_t>(at));
+        if (at >= slot_count || slot_seen[at]) return false;
+        slot_seen[at] = true;
+        ++leaf_slots;
       } else {
         if (at <= i || at >= node_count) return false;  // children come after their parent
         ++parents[at];
@@ -99,10 +102,7 @@ bool JumpGrid::check() const {
   if (node_count == 0 || parents[0] != 0) return false;
   for (std::size_t i = 1; i < node_count; ++i)
     if (parents[i] != 1) return false;
-  std::sort(leaf_slots.begin(), leaf_slots.end());
-  for (std::size_t s = 0; s < leaf_slots.size(); ++s)
-    if (leaf_slots[s] != s) return false;
-  return leaf_slots.size() == slot_count;
+  return leaf_slots == slot_count;  // none twice, none outside: all of them
 }
 
 JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {

@@ -913,6 +913,24 @@ TEST_CASE("an engine's jump grid follows a cluster far smaller than the box", "[
     differ += serial.nodes[i].first != parallel.nodes[i].first || serial.nodes[i].k_leaf != parallel.nodes[i].k_leaf;
   for (std::size_t s = 0; s < serial.slot_count; ++s) differ += serial.get(s) != parallel.get(s);
   CHECK(differ == 0);
+  // check() sees a broken encoding: a leaf's slots pointing past the end,
+  // or two leaves covering one slot.
+  {
+    const pdt::detail::JumpGrid& broken = serial;  // its nodes are not const: the array is the grid's
+    std::size_t leaf = 0;
+    while (leaf < broken.node_count && !broken.nodes[leaf].leaf()) ++leaf;
+    REQUIRE(leaf < broken.node_count);
+    const std::uint32_t first = broken.nodes[leaf].first;
+    broken.nodes[leaf].first = static_cast<std::uint32_t>(broken.slot_count);
+    CHECK_FALSE(broken.check());
+    std::size_t other = leaf + 1;
+    while (other < broken.node_count && !broken.nodes[other].leaf()) ++other;
+    REQUIRE(other < broken.node_count);
+    broken.nodes[leaf].first = broken.nodes[other].first;
+    CHECK_FALSE(broken.check());
+    broken.nodes[leaf].first = first;
+    CHECK(broken.check());
+  }
   m.grid_growth = pdt::Triangulation::Impl::GridGrowth::kernel;
   require_valid(t);
 }

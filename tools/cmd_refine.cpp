@@ -190,6 +190,9 @@ int cmd_refine(Args args) {
                         format_count(st.circumcentres) + " circumcentres; " + format_count(st.samples) + " of " +
                         format_count(st.surface_samples) + " surface samples)");
   row("removals", format_count(st.removals) + " (vertices too close to a surface sample)");
+  row("skipped", format_count(st.dead_skipped) + " bad cells destroyed before their turn (by a neighbour's insertion), " +
+                     format_count(st.died_in_engine) + " more while their insertion was queued in the engine, " +
+                     format_count(st.protected_skipped) + " left in the protected layer");
   row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
   std::snprintf(buf, sizeof buf,
                 "%.3f radius-edge (bound %.4g), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
@@ -222,9 +225,12 @@ int cmd_refine(Args args) {
     row("bounds", std::string("met by every tet whose circumcentre is inside, out of the protected layer"));
   }
   const pdt::WorkerStats w = st.engine.total();
-  std::snprintf(buf, sizeof buf, "%s completed, %s rollbacks, %s steals, %s escalated, imbalance %.2f",
+  std::snprintf(buf, sizeof buf,
+                "%s completed, %s rollbacks, %s steals, %s escalated, imbalance %.2f; %s sleeps (%.2f s asleep), "
+                "%.2f s idle (summed over workers)",
                 format_count(w.completed).c_str(), format_count(w.rollbacks).c_str(), format_count(w.steals).c_str(),
-                format_count(w.escalated).c_str(), st.engine.imbalance());
+                format_count(w.escalated).c_str(), st.engine.imbalance(), format_count(w.sleeps).c_str(),
+                w.seconds_asleep, w.seconds_idle);
   row("workers", buf);
   if (validate) {
     std::string why;

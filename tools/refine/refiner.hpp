@@ -62,6 +62,9 @@ struct RefineStats {
   std::uint64_t insertions = 0;   // circumcentres + samples + the box's corners
   std::uint64_t circumcentres = 0, samples = 0, removals = 0;
   std::uint64_t dead_skipped = 0;  // queued cells found dead when their turn came
+  // Cells alive when their insertion was submitted and dead when it ran (an
+  // engine operation that did nothing: insert_if_alive)
+  std::uint64_t died_in_engine = 0;
   std::uint64_t protected_skipped = 0;  // bad cells left in the protected layer
   std::uint64_t surface_samples = 0;  // samples available
   std::uint64_t start_points = 0;     // the box's corners and the starting lattice

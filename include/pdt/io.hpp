@@ -12,8 +12,9 @@
 namespace pdt {
 
 // Reads the points of a point-set file, by extension: .xyz (x y z per line,
-// extra columns ignored), .xyz.gz (gzip read as read_ops reads it), .ply (ascii or binary_little_endian; only
-// the 'vertex' element's x y z), .off (vertices only), .node (TetGen),
+// extra columns ignored), .xyz.gz (gzip read as read_ops reads it), .ply
+// (ascii, binary_little_endian or binary_big_endian; only the 'vertex'
+// element's x y z), .off (vertices only), .node (TetGen),
 // .smesh (TetGen PLC node section). Throws pdt::Error(bad_format) with file and
 // line, or pdt::Error(io_failure).
 std::vector<Point3> read_points(const std::string& path);

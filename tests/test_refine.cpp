@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,7 @@
 #include "common/tool_run.hpp"
 #include "pdt/io.hpp"
 #include "refine/domain.hpp"
+#include "refine/samples.hpp"
 
 using namespace pdt_test;
 using pdt::Point3;
@@ -252,4 +254,53 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   INFO("stdout:\n" << tiny.out);
   CHECK(tiny.code == 1);
   CHECK(tiny.out.find("the surface alone needs more sample points, over the point budget of 100") != std::string::npos);
+}
+
+TEST_CASE("refine: the surface samples' index finds the nearest sample within a radius, as a scan does", "[refine]") {
+  // Samples on a grid of cells of side 0.05 (as the refiner's: half its
+  // size), with duplicates, -0.0, negative coordinates, and clusters several
+  // to a cell; queries anywhere, radii from a tenth of a cell to four cells.
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<Point3> pts;
+  for (int i = 0; i < 3000; ++i) pts.push_back({u(rng), u(rng), 0.3 * u(rng)});
+  for (int i = 0; i < 200; ++i) pts.push_back({0.5 + 1e-3 * u(rng), -0.25 + 1e-3 * u(rng), 1e-3 * u(rng)});
+  pts.push_back(pts[7]);  // a duplicate
+  pts.push_back({-0.0, 0.0, -0.0});
+  const double cell = 0.05;
+  pdt_refine::Samples s(pts, cell);
+  REQUIRE(s.check());
+  REQUIRE(s.size() == pts.size());
+  for (std::uint32_t i = 0; i < pts.size(); i += 3) REQUIRE(s.claim(i));  // every third taken
+  REQUIRE_FALSE(s.claim(0));
+  for (int q = 0; q < 4000; ++q) {
+    const Point3 p{1.1 * u(rng), 1.1 * u(rng), 0.4 * u(rng)};
+    const double r = cell * (q % 4 == 0 ? 0.1 : q % 4 == 1 ? 0.5 : q % 4 == 2 ? 1.3 : 4.0);
+    double best = r * r, best_free = r * r;
+    bool any = false, any_free = false;
+    for (std::uint32_t i = 0; i < pts.size(); ++i) {
+      const double d2 = pdt_refine::dist2(p, pts[i]);
+      if (d2 < best) best = d2, any = true;
+      if (i % 3 != 0 && d2 < best_free) best_free = d2, any_free = true;
+    }
+    INFO("query " << p.x << " " << p.y << " " << p.z << ", radius " << r);
+    const std::int64_t got = s.nearest_within(p, r);
+    REQUIRE((got >= 0) == any);
+    if (any) REQUIRE(pdt_refine::dist2(p, pts[static_cast<std::size_t>(got)]) == best);
+    const std::int64_t got_free = s.nearest_free_within(p, r);
+    REQUIRE((got_free >= 0) == any_free);
+    if (any_free) {
+      REQUIRE(got_free % 3 != 0);
+      REQUIRE(pdt_refine::dist2(p, pts[static_cast<std::size_t>(got_free)]) == best_free);
+    }
+  }
+  for (const Point3& p : pts) REQUIRE(s.is_sample(p));
+  REQUIRE(s.is_sample({0.0, -0.0, 0.0}));  // equal to the -0.0 sample
+  REQUIRE_FALSE(s.is_sample({std::nextafter(pts[5].x, 2.0), pts[5].y, pts[5].z}));
+  REQUIRE_FALSE(s.is_sample({0.5, 0.5, 0.5}));
+  // No samples: nothing near, nothing is one.
+  pdt_refine::Samples none({}, cell);
+  REQUIRE(none.check());
+  REQUIRE(none.nearest_within({0, 0, 0}, 1) == -1);
+  REQUIRE_FALSE(none.is_sample({0, 0, 0}));
 }

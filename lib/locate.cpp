@@ -267,12 +267,17 @@ OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* aliv
     return OpStatus::rollback;
   }
   // The anchor held: its star cannot change, and (c, incarnation) names one
-  // cell ever, so finding it there means it is alive and is h's cell.
-  if (verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3) {
-    self.collect_star(ctx, h.anchor, ctx.small_star);
-    for (CellId c : ctx.small_star)
-      if (c == h.id && incarnation(c) == h.incarnation) *alive = true;
-  }
+  // cell ever, so finding it there means it is alive and is h's cell. An id
+  // whose incarnation has moved on was allocated again since h's cell was
+  // made, so that cell is gone: no need to look (the tag is atomic, and the
+  // incarnation only grows; h's own value, stored when its cell was made,
+  // happened before the handle reached this operation). An id with h's
+  // incarnation may still be free and not yet reused: its cell is alive only
+  // if the star holds it (the search stops there).
+  // (The tags grow after the records: an id past them is no cell's yet.)
+  if (verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3 && h.id < tags.size() &&
+      incarnation(h.id) == h.incarnation && self.collect_star(ctx, h.anchor, ctx.small_star, h.id))
+    *alive = incarnation(h.id) == h.incarnation;
   return OpStatus::done;
 }
 

@@ -49,10 +49,12 @@ inline TetShape shape(const std::array<Point3, 4>& p) {
   return s;
 }
 
-// The smallest of the six dihedral angles, in degrees.
+// The smallest of the six dihedral angles, in degrees. acos decreases, so
+// the smallest angle is acos of the largest cosine: one acos, not six (the
+// same value).
 inline double min_dihedral_degrees(const std::array<Point3, 4>& p) {
   static constexpr int edge[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
-  double smallest = 180;
+  double largest_cosine = -1;
   for (const auto& e : edge) {
     int o[2], k = 0;
     for (int v = 0; v < 4; ++v)
@@ -62,10 +64,9 @@ inline double min_dihedral_degrees(const std::array<Point3, 4>& p) {
     Point3 n0 = cross(u, sub(p[o[0]], p[e[0]])), n1 = cross(u, sub(p[o[1]], p[e[0]]));
     const double l = std::sqrt(norm2(n0) * norm2(n1));
     if (!(l > 0)) return 0;
-    const double cosine = std::clamp(dot(n0, n1) / l, -1.0, 1.0);
-    smallest = std::min(smallest, std::acos(cosine) * 180 / M_PI);
+    largest_cosine = std::max(largest_cosine, std::clamp(dot(n0, n1) / l, -1.0, 1.0));
   }
-  return smallest;
+  return std::acos(largest_cosine) * 180 / M_PI;
 }
 
 }  // namespace pdt_refine

@@ -340,10 +340,9 @@ struct Triangulation::Impl {
   // its small triangulation is built (removal.cpp says why).
   static constexpr std::size_t large_link = 256;
   void order_link(OpContext& ctx);
-  // The cells incident to v (v held), in ctx.star_seen's order of discovery.
-  // The cells incident to v, held (shared or exclusively) by ctx, into out.
-  // With `until` a cell id: stops when it is met (then returns true; out
-  // holds the cells met so far).
+  // The cells incident to v (v held by ctx, shared or exclusively) into out,
+  // in order of discovery (ctx.star_seen holds them). With `until` a cell id:
+  // stops when it is met (then returns true; out holds the cells met so far).
   bool collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out, CellId until = no_cell);
   void fill_hole_flat_link(OpContext& ctx, VertexId v);
   void sew_link_triangulation(OpContext& ctx, VertexId v);

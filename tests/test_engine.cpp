@@ -1218,12 +1218,14 @@ TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots",
     });
   };
   // Clustered points take the cut grid (build_split), within the cap too.
-  // Drained every 512 points, so that each regrowth sees a prefix of the
+  // Drained every 256 points, so that each regrowth sees a prefix of the
   // stream, half of it in the clusters: without the drains, which vertices
   // are live at a regrowth depends on the order the workers served the
   // blocks (under TSan the clusters' blocks could still be queued, the grid
   // then built of equal slots, and whether the walk watch cuts it later
-  // depends on the walks each worker saw).
+  // depends on the walks each worker saw). With the drains, a regrowth at n
+  // live vertices sees at least n - 256 of the prefix: crowded at least
+  // (n - 256) / 2n, over the 40% that cuts from n = 1,280 on.
   pdt::GenerateOptions clustered;
   clustered.points = scaled(20000, 8000);
   clustered.dist = pdt::Distribution::clusters;
@@ -1231,7 +1233,7 @@ TEST_CASE("engine: the jump grid grows with the vertex count, up to grid_slots",
   for (const pdt::Operation& op : pdt::generate(clustered).ops) cpts.push_back(op.point);
   for (std::size_t cap : {std::size_t{1} << 23, std::size_t{1000}, std::size_t{1}}) {
     pdt::Triangulation t;
-    run(t, cpts, cap, 512);
+    run(t, cpts, cap, 256);
     const auto& grid = pdt::detail::impl_of(t).grid;
     INFO("clustered points, cap " << cap << ", slots " << grid.slot_count << ", nodes " << grid.node_count);
     REQUIRE(grid.slot_count <= cap);

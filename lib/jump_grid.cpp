@@ -32,6 +32,12 @@ bool for_shell(const int at[3], int r, int k, Visit&& visit) {
   return false;
 }
 
+// The slots a build aims at: `slots`, or one per 2 of the n live vertices
+// when 0; at least 1, at most 2^30.
+std::size_t slots_wanted(std::size_t slots, std::size_t n) {
+  return std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);
+}
+
 }  // namespace
 
 VertexId JumpGrid::any_in(std::uint32_t n, int& budget) const {
@@ -131,7 +137,7 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
     const KPoint& p = verts[v].p;
     box.add(p.x(), p.y(), p.z());
   }
-  const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, n / 2), std::size_t{1} << 30);
+  const std::size_t want = slots_wanted(slots, n);
   // About `per_slot` vertices per slot, 2 unless the cap asks for more: few
   // slots are empty right after a build. Raised until the slots fit the cap.
   double per_slot = std::max(2.0, static_cast<double>(n) / static_cast<double>(want));
@@ -272,6 +278,22 @@ void keep_largest(std::atomic<VertexId>& slot, VertexId v, bool parallel) {
   }
 }
 
+// Counts one more vertex in `count`: from pieces in parallel, atomically.
+void count_one(std::uint32_t& count, bool parallel) {
+  if (parallel)
+    std::atomic_ref<std::uint32_t>(count).fetch_add(1, std::memory_order_relaxed);
+  else
+    ++count;
+}
+
+// g's `slot_count` slots, allocated and all empty.
+void allocate_empty_slots(JumpGrid& g, bool parallel) {
+  g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
+  for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
+  });
+}
+
 }  // namespace
 
 JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
@@ -279,21 +301,17 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
   JumpGrid g;
   auto run = [&] {
     const Extent e = live_extent(verts, parallel);
-    const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
+    const std::size_t want = slots_wanted(slots, e.n);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
     const auto k = static_cast<std::uint32_t>(g.lattice.res);
     g.node_count = 1;
     g.nodes = std::make_unique<Node[]>(1);
     g.nodes[0] = {0, k | leaf_bit};
     g.slot_count = std::size_t{k} * k * k;
-    g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
-    for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
-    });
-    // Each slot keeps its largest id: one thread going up the ids stores
-    // each; pieces in parallel keep the larger, whichever comes first. And
-    // each slot's vertices are counted, for `crowded` (scratch mapped for
-    // the build and unmapped after it, as in build).
+    allocate_empty_slots(g, parallel);
+    // Each slot keeps its largest id (keep_largest), and its vertices are
+    // counted, for `crowded` (scratch mapped for the build and unmapped after
+    // it, as in build).
     StableArray<std::uint32_t> counts(g.slot_count);
     counts.grow(g.slot_count, false);  // zeros
     for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
@@ -301,10 +319,7 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
         if (verts[v].multiplicity == 0) continue;
         const std::size_t s = g.slot_of(verts[v].p);
         keep_largest(g.slots[s], static_cast<VertexId>(v), parallel);
-        if (parallel)
-          std::atomic_ref<std::uint32_t>(counts[s]).fetch_add(1, std::memory_order_relaxed);
-        else
-          ++counts[s];
+        count_one(counts[s], parallel);
       }
     });
     // Crowded: 8 times the mean load, and more than crowded_slot (a grid at
@@ -333,7 +348,7 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
   JumpGrid g;
   auto run = [&] {
     const Extent e = live_extent(verts, parallel);
-    const std::size_t want = std::min<std::size_t>(slots ? slots : std::max<std::size_t>(1, e.n / 2), std::size_t{1} << 30);
+    const std::size_t want = slots_wanted(slots, e.n);
     const std::size_t limit = std::min<std::size_t>(std::max(want, most), std::size_t{1} << 30);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
     const auto k0 = static_cast<std::uint32_t>(g.lattice.res);
@@ -383,10 +398,7 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
           if (leaf_of[v] != 0 && nodes[leaf_of[v]].leaf()) continue;
           const std::uint32_t at = leaf_node(verts[v].p);
           leaf_of[v] = at;
-          if (parallel)
-            std::atomic_ref<std::uint32_t>(count[at]).fetch_add(1, std::memory_order_relaxed);
-          else
-            ++count[at];
+          count_one(count[at], parallel);
         }
       });
       // Cut the last round's crowded leaves, in node order, while the slots
@@ -419,10 +431,7 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
     g.nodes = std::make_unique<Node[]>(g.node_count);
     for (std::size_t i = 0; i < g.node_count; ++i) g.nodes[i] = nodes[i];
     g.slot_count = slot_total;
-    g.slots.reset(new std::atomic<VertexId>[g.slot_count]);
-    for_range(g.slot_count, parallel, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t s = begin; s < end; ++s) g.set(s, no_vertex);
-    });
+    allocate_empty_slots(g, parallel);
     // Each slot keeps its largest id, as in build_equal.
     for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {

@@ -273,11 +273,11 @@ OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* aliv
   // incarnation only grows; h's own value, stored when its cell was made,
   // happened before the handle reached this operation). An id with h's
   // incarnation may still be free and not yet reused: its cell is alive only
-  // if the star holds it (the search stops there).
+  // if the star holds it (the search stops there; a cell met there keeps the
+  // incarnation read above, since nothing in the star changes).
   // (The tags grow after the records: an id past them is no cell's yet.)
-  if (verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3 && h.id < tags.size() &&
-      incarnation(h.id) == h.incarnation && self.collect_star(ctx, h.anchor, ctx.small_star, h.id))
-    *alive = incarnation(h.id) == h.incarnation;
+  *alive = verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3 && h.id < tags.size() &&
+           incarnation(h.id) == h.incarnation && self.collect_star(ctx, h.anchor, ctx.small_star, h.id);
   return OpStatus::done;
 }
 

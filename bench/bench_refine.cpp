@@ -245,7 +245,7 @@ Outcome run_pdt(const Options& o, const pdt_refine::Domain& d, unsigned workers)
   out.removals = st.removals;
   out.rollbacks = st.engine.total().rollbacks;
   out.imbalance = st.engine.imbalance();
-  const pdt_refine::MeshQuality q = pdt_refine::measure(t, d, o.size, o.ratio, o.seed);
+  const pdt_refine::MeshQuality q = pdt_refine::measure(t, d, o.size, o.ratio, o.seed, workers);
   out.vertices = t.number_of_vertices();
   out.finite_cells = t.number_of_finite_cells();
   out.tets_inside = q.inside;

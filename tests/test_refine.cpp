@@ -20,6 +20,7 @@
 #include "common/tool_run.hpp"
 #include "pdt/io.hpp"
 #include "refine/domain.hpp"
+#include "refine/refiner.hpp"
 #include "refine/samples.hpp"
 
 using namespace pdt_test;
@@ -303,4 +304,35 @@ TEST_CASE("refine: the surface samples' index finds the nearest sample within a 
   REQUIRE(none.check());
   REQUIRE(none.nearest_within({0, 0, 0}, 1) == -1);
   REQUIRE_FALSE(none.is_sample({0, 0, 0}));
+}
+
+TEST_CASE("refine: the quality measure gives the same figures on one thread and on several", "[refine]") {
+  // measure() splits the cells among threads when asked; its counts, minima
+  // and maxima must not depend on the split.
+  pdt_refine::RefineOptions o;
+  o.domain = pdt_refine::domain_by_name("torus");
+  o.size = 0.1;
+  o.workers = 2;
+  pdt::Triangulation t;
+  const pdt_refine::RefineStats st = pdt_refine::refine(t, o);
+  REQUIRE_FALSE(st.budget_hit);
+  const pdt_refine::MeshQuality one = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed, 1);
+  REQUIRE(one.inside > 1000);
+  REQUIRE(one.judged > one.inside / 2);
+  CHECK(one.violations == 0);
+  CHECK(one.worst_ratio <= o.ratio);
+  for (unsigned threads : {2u, 4u, 7u}) {
+    INFO(threads << " threads");
+    const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed, threads);
+    CHECK(q.inside == one.inside);
+    CHECK(q.judged == one.judged);
+    CHECK(q.protected_layer == one.protected_layer);
+    CHECK(q.violations == one.violations);
+    CHECK(q.worst_ratio == one.worst_ratio);
+    CHECK(q.largest_radius == one.largest_radius);
+    CHECK(q.min_dihedral == one.min_dihedral);
+    CHECK(q.min_dihedral_judged == one.min_dihedral_judged);
+    CHECK(q.slivers == one.slivers);
+    CHECK(q.slivers_judged == one.slivers_judged);
+  }
 }

@@ -178,7 +178,7 @@ int cmd_refine(Args args) {
     std::fflush(summary_stream());
     return 1;  // the trace writer is discarded: an older file of its name stays
   }
-  const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed);
+  const pdt_refine::MeshQuality q = pdt_refine::measure(t, o.domain, o.size, o.ratio, o.seed, o.workers);
 
   char buf[256];
   row("domain", o.domain.name + ", size " + pdt::support::format_double(o.size) + ", ratio " +

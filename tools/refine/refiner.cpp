@@ -2,7 +2,9 @@
 #include "refine/refiner.hpp"
 
 #include <oneapi/tbb/concurrent_queue.h>
+#include <oneapi/tbb/blocked_range.h>
 #include <oneapi/tbb/global_control.h>
+#include <oneapi/tbb/parallel_reduce.h>
 #include <oneapi/tbb/task_arena.h>
 
 #include <algorithm>
@@ -537,12 +539,14 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
   return st;
 }
 
-MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed) {
-  MeshQuality q;
+MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed,
+                    unsigned threads) {
   const Samples samples(surface_samples(d, size, seed), 0.5 * size);
   const double snap = snap_radius(size);
-  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
-    if (!t.is_finite_cell(c)) continue;
+  // One cell into a partial result. Counts, minima and maxima: the sum of
+  // the parts is the same whichever way the cells are split.
+  auto judge = [&](pdt::CellId c, MeshQuality& q) {
+    if (!t.is_finite_cell(c)) return;
     std::array<Point3, 4> p;
     for (int i = 0; i < 4; ++i) p[i] = t.point(t.cell_vertex(c, i));
     const Point3 centroid{(p[0].x + p[1].x + p[2].x + p[3].x) / 4, (p[0].y + p[1].y + p[2].y + p[3].y) / 4,
@@ -554,10 +558,10 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
       if (dihedral < MeshQuality::sliver_degrees) ++q.slivers;
     }
     const TetShape s = shape(p);
-    if (!s.ok || !(d.f(s.circumcentre) < 0)) continue;
+    if (!s.ok || !(d.f(s.circumcentre) < 0)) return;
     if (samples.nearest_within(s.circumcentre, snap) >= 0) {
       ++q.protected_layer;
-      continue;
+      return;
     }
     ++q.judged;
     q.min_dihedral_judged = std::min(q.min_dihedral_judged, dihedral);
@@ -565,8 +569,38 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
     q.worst_ratio = std::max(q.worst_ratio, s.radius_edge);
     q.largest_radius = std::max(q.largest_radius, s.circumradius);
     if (s.circumradius > size || s.radius_edge > ratio) ++q.violations;
+  };
+  auto join = [](MeshQuality a, const MeshQuality& b) {
+    a.inside += b.inside;
+    a.judged += b.judged;
+    a.protected_layer += b.protected_layer;
+    a.violations += b.violations;
+    a.worst_ratio = std::max(a.worst_ratio, b.worst_ratio);
+    a.largest_radius = std::max(a.largest_radius, b.largest_radius);
+    a.min_dihedral = std::min(a.min_dihedral, b.min_dihedral);
+    a.min_dihedral_judged = std::min(a.min_dihedral_judged, b.min_dihedral_judged);
+    a.slivers += b.slivers;
+    a.slivers_judged += b.slivers_judged;
+    return a;
+  };
+  const pdt::CellId cells = t.cell_id_bound();
+  if (threads <= 1) {
+    MeshQuality q;
+    for (pdt::CellId c = 0; c < cells; ++c) judge(c, q);
+    return q;
   }
-  return q;
+  // The triangulation's const queries are safe from several threads while
+  // nothing changes it.
+  tbb::task_arena arena(static_cast<int>(threads));
+  return arena.execute([&] {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<pdt::CellId>(0, cells, 4096), MeshQuality{},
+        [&](const tbb::blocked_range<pdt::CellId>& r, MeshQuality q) {
+          for (pdt::CellId c = r.begin(); c < r.end(); ++c) judge(c, q);
+          return q;
+        },
+        join);
+  });
 }
 
 }  // namespace pdt_refine

@@ -102,7 +102,9 @@ struct MeshQuality {
   static constexpr double sliver_degrees = 5;
   std::uint64_t slivers = 0, slivers_judged = 0;
 };
-// The samples are those refine() used (the same size and seed).
-MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed);
+// The samples are those refine() used (the same size and seed). threads > 1
+// judges the cells on that many threads (the same result).
+MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed,
+                    unsigned threads = 1);
 
 }  // namespace pdt_refine

@@ -266,18 +266,16 @@ OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* aliv
     self.release_all(ctx);
     return OpStatus::rollback;
   }
-  // The anchor held: its star cannot change, and (c, incarnation) names one
-  // cell ever, so finding it there means it is alive and is h's cell. An id
-  // whose incarnation has moved on was allocated again since h's cell was
-  // made, so that cell is gone: no need to look (the tag is atomic, and the
-  // incarnation only grows; h's own value, stored when its cell was made,
-  // happened before the handle reached this operation). An id with h's
-  // incarnation may still be free and not yet reused: its cell is alive only
-  // if the star holds it (the search stops there; a cell met there keeps the
-  // incarnation read above, since nothing in the star changes).
-  // (The tags grow after the records: an id past them is no cell's yet.)
+  // The anchor held, no cell holding it can change. A tag that names h's
+  // incarnation, not freed (I8), says h's cell is alive: the operation that
+  // destroys it frees or renews its id, holding all its vertices, so it
+  // finished before we took the anchor (whose lock ordered its writes before
+  // our reads) or cannot start until we let go. The anchor must be one of the
+  // cell's vertices, as a report's handle has it; then its record cannot
+  // change either. (A made-up anchor is not: its cell may be rewritten while
+  // we read it, so the tag is read again after; a change means dead.)
   *alive = verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3 && h.id < tags.size() &&
-           incarnation(h.id) == h.incarnation && self.collect_star(ctx, h.anchor, ctx.small_star, h.id);
+           tag_names(h.id, h.incarnation) && index_of(h.id, h.anchor) >= 0 && tag_names(h.id, h.incarnation);
   return OpStatus::done;
 }
 

@@ -281,6 +281,7 @@ void Triangulation::Impl::free_all_cells(OpContext& ctx) {
 
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
   cells[c].v[0] = no_vertex;
+  set_mark(c, mark_free);  // I8: handles to it read as dead from here on
   --ctx.d_cells;
   if (retires(c)) return;
   give_id<cell_segment>(ctx.free_cells, c, spare_cells, cell_next(), cell_link());
@@ -404,7 +405,12 @@ void Triangulation::Impl::fold_counters(OpContext& ctx) {
 
 void Triangulation::Impl::clear() {
   // A small (per-removal) triangulation keeps its pages: it is cleared per
-  // operation. The tags keep their contents: cell incarnations go on counting.
+  // operation. The tags keep their contents: cell incarnations go on counting,
+  // and the live cells' ids are marked free (I8), so that no handle from
+  // before names a cell again. (Nobody holds handles to a small one's cells.)
+  if (!is_small)
+    for (CellId c = 0; c < cells.size(); ++c)
+      if (cell_alive(c)) set_mark(c, mark_free);
   cells.clear(!is_small);
   tags.clear(false);
   verts.clear(!is_small);

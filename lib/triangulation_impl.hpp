@@ -21,7 +21,11 @@
 //             30-bit count never wraps. The mark (1 in, 2 out)
 //             is set by a conflict-zone search on the cells it meets and
 //             cleared before the search returns, so outside a search every
-//             mark is 0 (I7). Only a thread holding a facet of c exclusively
+//             live cell's mark is 0 (I7). A dead id's mark is 3 (free_cell,
+//             clear()) until renew() makes it live again, or its tag is 0
+//             (never allocated): so a tag holding a handle's incarnation with
+//             a mark other than 3 names that handle's cell, alive (I8;
+//             hold_cell). Only a thread holding a facet of c exclusively
 //             writes c's mark (two such threads would share a vertex), so a
 //             search owns the marks it reads; the word is atomic (relaxed)
 //             because a reader holding another vertex of c may read the
@@ -44,7 +48,8 @@
 //   I5 every facet is locally Delaunay under the symbolic perturbation, and the
 //      hull is convex (the infinite cells pass the same test).
 //   I6 V - E + F - C = 0 counting the infinite vertex (a triangulated 3-sphere).
-//   I7 no cell is marked.
+//   I7 no live cell is marked.
+//   I8 an id below cells.size() that is not live has tag 0 or mark_free.
 // Always (checked by validate()): every live vertex lies in filter's box, and
 // the filter's epsilons are those of its box (box_filter.hpp).
 // While dimension() < 3 there is no cell: the live vertices are listed in
@@ -112,7 +117,7 @@ struct Triangulation::Impl {
   detail::StableArray<CellRec> cells;
   detail::StableArray<std::atomic<std::uint32_t>> tags;
   detail::StableArray<VertexRec> verts;
-  static constexpr std::uint32_t mark_in = 1, mark_out = 2, mark_bits = 3;
+  static constexpr std::uint32_t mark_in = 1, mark_out = 2, mark_free = 3, mark_bits = 3;
   static constexpr std::uint32_t last_incarnation = ~std::uint32_t{0} >> 2;
 
   std::atomic<int> dim{-1};
@@ -169,6 +174,12 @@ struct Triangulation::Impl {
   void set_mark(CellId c, std::uint32_t m) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
     tags[c].store((t & ~mark_bits) | m, std::memory_order_relaxed);
+  }
+  // Whether c's tag names the live cell of handle h (I8): its incarnation,
+  // and not freed since. A search may mark that cell out meanwhile.
+  bool tag_names(CellId c, std::uint32_t incarnation) const {
+    const std::uint32_t t = tags[c].load(std::memory_order_acquire);
+    return incarnation != 0 && (t >> 2) == incarnation && (t & mark_bits) != mark_free;
   }
   std::uint32_t incarnation(CellId c) const { return tags[c].load(std::memory_order_relaxed) >> 2; }
   // c's id is retired when c dies (never reused): a next incarnation would

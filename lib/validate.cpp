@@ -67,7 +67,13 @@ bool Triangulation::Impl::validate(std::string* why) const {
 
   std::size_t live_cells = 0, finite_cells = 0;
   for (CellId c = 0; c < cells.size(); ++c) {
-    if (!cell_alive(c)) continue;
+    if (!cell_alive(c)) {
+      // I8
+      const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
+      if (t != 0 && (t & mark_bits) != mark_free)
+        return fail(f << "cell id " << c << " is free but its tag (incarnation " << (t >> 2) << ") does not say so");
+      continue;
+    }
     ++live_cells;
     const CellRec& r = cells[c];
     bool finite = true;
@@ -99,7 +105,7 @@ bool Triangulation::Impl::validate(std::string* why) const {
     if (finite && detail::orient(pt(r.v[0]), pt(r.v[1]), pt(r.v[2]), pt(r.v[3])) <= 0)
       return fail(f << "cell " << c << " is not positively oriented");
     // I7
-    if (mark(c) != 0) return fail(f << "cell " << c << " is still marked by a conflict-zone search");
+    if (mark(c) != 0) return fail(f << "cell " << c << " is still marked (" << mark(c) << ")");
   }
   if (live_cells != n_cells) return fail(f << "cell count " << n_cells << " but " << live_cells << " live cells");
   if (finite_cells != n_finite_cells)

@@ -362,6 +362,81 @@ TEST_CASE("contract: the engine's locate, nearest_vertex and visit while it work
   REQUIRE(nearest.load() > 0);
 }
 
+TEST_CASE("contract: a cell handle names its cell only while it lives, through its own anchor",
+          "[engine][contract][handles][tsan]") {
+  // A live cell's handle is read from its tag (incarnation, and not freed)
+  // while its anchor is held. A handle whose anchor is not one of the cell's
+  // vertices, or whose incarnation is 0, names nothing; so does every handle
+  // from before clear(), also once the ids (cells and anchors) live again.
+  pdt::Triangulation t;
+  const std::vector<Point3> pts = random_points(400, 31);
+  for (const Point3& p : pts) (void)t.insert(p);
+  std::vector<pdt::CellHandle> live, forged;
+  std::vector<Point3> corner;  // a vertex of each forged handle's cell
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_finite_cell(c)) continue;
+    const pdt::CellHandle h = t.cell_handle(c);
+    live.push_back(h);
+    // A live vertex not in the cell, as the anchor.
+    pdt::VertexId other = 1;
+    while (!t.is_vertex(other) || other == t.cell_vertex(c, 0) || other == t.cell_vertex(c, 1) ||
+           other == t.cell_vertex(c, 2) || other == t.cell_vertex(c, 3))
+      ++other;
+    forged.push_back({h.id, h.incarnation, other});
+    corner.push_back(t.point(t.cell_vertex(c, 0)));
+  }
+  REQUIRE(live.size() > 1000);
+  for (const pdt::CellHandle& h : live) {
+    REQUIRE(t.cell(h).has_value());
+    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, 0, h.anchor}).has_value());
+    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, h.incarnation + 1, h.anchor}).has_value());
+  }
+  for (const pdt::CellHandle& h : forged) REQUIRE_FALSE(t.cell(h).has_value());
+  // The engine says the same, while it inserts elsewhere.
+  tbb::task_arena arena(2);
+  std::atomic<int> visited_alive{0}, visited_dead{0}, inserted{0}, refused{0}, errors{0};
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(2));
+    const std::vector<Point3> more = random_points(scaled(3000, 600), 32);
+    for (std::size_t i = 0; i < more.size(); ++i) {
+      e.insert(more[i], {});
+      if (i < forged.size()) {
+        e.visit(forged[i], [](const pdt::CellView&) {}, [&](const pdt::OpResult& r) {
+          if (r.error) errors.fetch_add(1);
+          (r.alive ? visited_alive : visited_dead).fetch_add(1);
+        });
+        // At a vertex of that cell: were the handle taken as alive, it would go in.
+        e.insert_if_alive(corner[i], forged[i], [&](const pdt::OpResult& r) {
+          if (r.error) errors.fetch_add(1);
+          (r.insert.vertex == pdt::no_vertex ? refused : inserted).fetch_add(1);
+        });
+      }
+    }
+    e.drain();
+  });
+  const int n = static_cast<int>(std::min(forged.size(), scaled(std::size_t{3000}, std::size_t{600})));
+  CHECK(errors.load() == 0);
+  CHECK(visited_alive.load() == 0);
+  CHECK(visited_dead.load() == n);
+  CHECK(inserted.load() == 0);
+  CHECK(refused.load() == n);
+  // Cleared, then fewer points than before: some old ids come back as cells
+  // and as anchors, others stay unused; no old handle names a cell.
+  std::vector<pdt::CellHandle> before;
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c)
+    if (t.is_cell(c)) before.push_back(t.cell_handle(c));
+  t.clear();
+  for (std::size_t i = 0; i < pts.size() / 2; ++i) (void)t.insert(pts[i]);
+  REQUIRE(t.cell_id_bound() < before.size());
+  std::size_t anchors_back = 0;
+  for (const pdt::CellHandle& h : before) {
+    REQUIRE_FALSE(t.cell(h).has_value());
+    anchors_back += t.is_vertex(h.anchor);
+  }
+  CHECK(anchors_back > 100);  // the anchors of the first 200 points
+  REQUIRE(t.validate());
+}
+
 // =============================================================================
 // 3. Clients that misbehave neither kill nor hang the engine
 // =============================================================================

@@ -688,7 +688,7 @@ TEST_CASE("a cell id at its last incarnation is retired, never wrapped to a repe
   auto& impl = pdt::detail::impl_of(t);
   constexpr std::uint32_t last = std::remove_reference_t<decltype(impl)>::last_incarnation;
   const pdt::CellId preset = t.cell_id_bound();
-  for (pdt::CellId c = 0; c < preset; ++c) impl.tags[c].store((last - 1) << 2);
+  for (pdt::CellId c = 0; c < preset; ++c) impl.tags[c].store(((last - 1) << 2) | (impl.tags[c].load() & 3));  // a free id stays marked free
   std::map<std::pair<pdt::CellId, std::uint32_t>, std::array<pdt::VertexId, 4>> seen;  // handle -> its cell
   std::vector<pdt::CellHandle> at_last;
   auto look = [&] {

@@ -197,6 +197,35 @@ TEST_CASE("validate detects a wrong vertex-to-cell link", "[validate]") {
   }
 }
 
+TEST_CASE("validate detects a cell mark out of place: a live cell marked, a free id not marked free", "[validate]") {
+  // I7 and I8 (triangulation_impl.hpp): a cell handle is read from the tag.
+  pdt::Triangulation t = random_triangulation(200, 6);
+  for (int k = 0; k < 20; ++k) t.remove(t.vertices()[static_cast<std::size_t>(3 * k)]);  // some ids freed
+  auto& m = pdt::detail::impl_of(t);
+  pdt::CellId live = pdt::no_cell, free = pdt::no_cell;
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c)
+    if (t.is_cell(c))
+      live = c;
+    else if (m.tags[c].load() != 0)  // once allocated (a fresh id's tag is 0)
+      free = c;
+  REQUIRE(live != pdt::no_cell);
+  REQUIRE(free != pdt::no_cell);
+  REQUIRE((m.tags[free].load() & 3) == 3);  // freed: marked so
+  require_valid(t);
+  SECTION("a live cell still marked by a search") {
+    m.tags[live].fetch_or(1);
+    require_invalid(t);
+    m.tags[live].fetch_and(~3u);
+    require_valid(t);
+  }
+  SECTION("a free id whose tag reads as a live incarnation") {
+    m.tags[free].fetch_and(~3u);
+    require_invalid(t);
+    m.tags[free].fetch_or(3);
+    require_valid(t);
+  }
+}
+
 TEST_CASE("validate detects a facet that is not locally Delaunay", "[validate]") {
   using KPoint = pdt::Triangulation::Impl::KPoint;
   SECTION("bipyramid: apex moved inside the other tetrahedron's circumsphere") {

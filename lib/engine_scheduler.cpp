@@ -282,13 +282,24 @@ Block* EngineState::claim(Worker& w) {
     w.home_cursor = n ? (w.home_cursor + 1) % n : 0;
     w.repeat = 0;
   }
-  for (std::uint32_t k = 0; k < n; ++k) {
-    const std::uint32_t at = (w.home_cursor + k) % n;
-    if (Block* b = try_claim(first + at)) {
-      w.repeat = k == 0 ? w.repeat + 1 : 1;
-      w.home_cursor = at;
-      return b;
-    }
+  // The home's blocks from the cursor on, round to it, visiting only those
+  // marked non-empty (with one worker every block is home: reading each
+  // block's count took 4% of a refinement, whose few operations in flight
+  // make every operation a claim).
+  auto home_run = [&](std::uint32_t from, std::uint32_t to) -> Block* {
+    for (std::uint32_t i = nonempty.next(from, to); i < to; i = nonempty.next(i + 1, to))
+      if (Block* b = try_claim(i)) {
+        const std::uint32_t at = i - first;
+        w.repeat = at == w.home_cursor ? w.repeat + 1 : 1;
+        w.home_cursor = at;
+        return b;
+      }
+    return nullptr;
+  };
+  if (n != 0) {
+    if (w.home_cursor >= n) w.home_cursor = 0;  // a recut shrank the home
+    if (Block* b = home_run(first + w.home_cursor, end)) return b;
+    if (Block* b = home_run(first, first + w.home_cursor)) return b;
   }
   if (!opts.stealing) return nullptr;
   if (Block* b = steal(true)) return b;

@@ -146,7 +146,8 @@ class Samples {
     for (std::size_t at = hash(k) & mask;; at = (at + 1) & mask) {
       const Slot& slot = table_[at];
       if (slot.begin == empty_slot) return nullptr;
-      if (slot.key == k) return &slot;
+      // Coordinate by coordinate: the array's == is a call to memcmp here.
+      if (slot.key[0] == k[0] && slot.key[1] == k[1] && slot.key[2] == k[2]) return &slot;
     }
   }
   // Where cell k goes while the table is built (k not in it yet).

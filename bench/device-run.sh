@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# Runs bench/scaling.sh with the binaries and libraries bench/device-pack.sh packed, on a
+# machine that has neither our build nor our dependencies (the lent 16-core one).
+# Usage: bench/device-run.sh OUTDIR [SECONDS]    (DEV: the packed folder, default .dev)
+# The tables are written in a scratch folder (WORK, default a new one under /tmp) and
+# packed into OUTDIR/scaling-results.tar.gz at the end, the refiner trace left out: one
+# file, as the lent machine's $OUT takes few. SECONDS is scaling.sh's deadline: give the
+# call a minute more.
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+dev=${DEV:-$here/../.dev}
+if [ ! -f "$dev/lib.tar.xz" ] || [ ! -x "$dev/bin/pdt" ]; then
+  echo "$0: $dev holds no pack (run bench/device-pack.sh first, and carry $dev)" >&2
+  exit 2
+fi
+[ -d "$dev/lib" ] || tar -C "$dev" -xJf "$dev/lib.tar.xz"
+export LD_LIBRARY_PATH=$dev/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
+export BIN=$dev/bin
+export PDT_RECORD_COMMIT=${PDT_RECORD_COMMIT:-$(cat "$dev/COMMIT")}
+export PDT_RECORD_NOTE=${PDT_RECORD_NOTE:-"lent machine; Release binaries (pool allocator) built on Debian 12 at $PDT_RECORD_COMMIT, with Debian 12's libraries carried beside them (bench/device-pack.sh); stopped at the session's deadline if unfinished"}
+for b in "$BIN"/*; do
+  if ldd "$b" | grep -q 'not found'; then
+    echo "$0: $b misses libraries here:" >&2
+    ldd "$b" | grep 'not found' >&2
+    exit 2
+  fi
+done
+if [ $# -lt 1 ]; then
+  echo "usage: $0 OUTDIR [SECONDS]" >&2
+  exit 2
+fi
+out=$1
+shift
+mkdir -p "$out"
+work=${WORK:-$(mktemp -d /tmp/pdt-scaling.XXXXXX)}
+status=0
+bash "$here/scaling.sh" "$work" "$@" || status=$?
+tar -C "$work" -czf "$out/scaling-results.tar.gz" --exclude='*.ops' .
+echo "$0: the tables are in $out/scaling-results.tar.gz (exit status $status)" >&2
+exit $status

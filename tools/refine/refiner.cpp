@@ -584,6 +584,7 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
     return a;
   };
   const pdt::CellId cells = t.cell_id_bound();
+  threads = std::min(threads, std::max(1u, std::thread::hardware_concurrency()));  // as refine()'s arena
   if (threads <= 1) {
     MeshQuality q;
     for (pdt::CellId c = 0; c < cells; ++c) judge(c, q);

@@ -272,10 +272,12 @@ OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* aliv
   // finished before we took the anchor (whose lock ordered its writes before
   // our reads) or cannot start until we let go. The anchor must be one of the
   // cell's vertices, as a report's handle has it; then its record cannot
-  // change either. (A made-up anchor is not: its cell may be rewritten while
-  // we read it, so the tag is read again after; a change means dead.)
+  // change either. A made-up anchor does not hold the cell, which may be
+  // rewritten meanwhile (record_names): but a record being written never
+  // names a vertex we hold, old value or new (its writer holds all of both;
+  // a freed record names none), so such a handle reads as dead.
   *alive = verts[h.anchor].multiplicity > 0 && dim.load(std::memory_order_acquire) == 3 && h.id < tags.size() &&
-           tag_names(h.id, h.incarnation) && index_of(h.id, h.anchor) >= 0 && tag_names(h.id, h.incarnation);
+           tag_names(h.id, h.incarnation) && record_names(h.id, h.anchor);
   return OpStatus::done;
 }
 

@@ -245,7 +245,7 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     bool any_retired = false;
     if (some_at_last_incarnation.load(std::memory_order_relaxed))
       for (std::size_t i = first; i < first + size; ++i)
-        any_retired |= incarnation(static_cast<CellId>(i)) == last_incarnation;
+        any_retired |= incarnation(static_cast<CellId>(i)) >= retire_at;
     if (!any_retired) break;
     // Rare (an id allocated 2^30 times, then clear()): that range stays unused.
   }
@@ -280,7 +280,9 @@ void Triangulation::Impl::free_all_cells(OpContext& ctx) {
 }
 
 void Triangulation::Impl::free_cell(OpContext& ctx, CellId c) {
-  cells[c].v[0] = no_vertex;
+  // Every slot: a free record names no vertex, so a handle check holding a
+  // vertex of the cell it was never finds that vertex here (hold_cell).
+  for (VertexId& w : cells[c].v) w = no_vertex;
   set_mark(c, mark_free);  // I8: handles to it read as dead from here on
   --ctx.d_cells;
   if (retires(c)) return;

@@ -6,8 +6,8 @@
 //   CellRec.n[i]  4 * d + j: cell d shares this cell's facet i (the facet
 //                 opposite v[i]) and that facet is d's facet j. So following an
 //                 adjacency and finding the mirror facet is one load.
-//                 A free cell has v[0] == no_vertex and n[0] == the next free
-//                 cell of the pool that owns it.
+//                 A free cell has v[0] == no_vertex (a freed one: every slot)
+//                 and n[0] == the next free cell of the pool that owns it.
 //   VertexRec     point, one incident cell, multiplicity, lock word, stamp.
 //                 A free vertex has multiplicity 0 and cell == the next free
 //                 vertex of its pool (while dimension < 3, a live vertex's cell

@@ -15,10 +15,10 @@
 //   cells[c], verts[v] index-based, in StableArrays, so ids never move.
 //   tags[c]   incarnation << 2 | mark. The incarnation counts the allocations
 //             of id c over the triangulation's whole life (clear() keeps it),
-//             so (c, incarnation) names one cell ever: an id that reaches
-//             last_incarnation (2^30 - 1) is retired when that cell dies
-//             (never reused: one id per 2^30 allocations of it), so the
-//             30-bit count never wraps. The mark (1 in, 2 out)
+//             so (c, incarnation) names one cell ever: an id whose cell dies
+//             at retire_at (2^30 - 2) or later is retired (never reused: one
+//             id per 2^30 allocations of it), so the 30-bit count never
+//             wraps (retire_at). The mark (1 in, 2 out)
 //             is set by a conflict-zone search on the cells it meets and
 //             cleared before the search returns, so outside a search every
 //             live cell's mark is 0 (I7). A dead id's mark is 3 (free_cell,
@@ -36,7 +36,7 @@
 //
 // Invariants while dimension() == 3 (checked by validate()):
 //   I1 a live cell has 4 distinct live vertices; a free cell has v[0] == no_vertex
-//      and n[0] is the next free cell of the pool that owns it.
+//      (once freed, every slot) and n[0] is the next free cell of the pool that owns it.
 //   I2 adjacency is symmetric: cells[c].n[i] == 4d+j  <=>  cells[d].n[j] == 4c+i,
 //      and the two cells agree on the 3 vertices of the shared facet, seen in
 //      opposite orientations.
@@ -147,7 +147,7 @@ struct Triangulation::Impl {
   // before carving new storage, so the storage follows the live mesh however
   // the work moves between the engine's workers.
   std::mutex spare_mutex;
-  // Some cell id has reached last_incarnation (then reserve_cells looks for
+  // Some cell id has reached retire_at (then reserve_cells looks for
   // such ids in the ranges it carves; clear() keeps incarnations).
   std::atomic<bool> some_at_last_incarnation{false};
   detail::SpareSegments spare_cells, spare_vertices;
@@ -182,18 +182,36 @@ struct Triangulation::Impl {
     return incarnation != 0 && (t >> 2) == incarnation && (t & mark_bits) != mark_free;
   }
   std::uint32_t incarnation(CellId c) const { return tags[c].load(std::memory_order_relaxed) >> 2; }
-  // c's id is retired when c dies (never reused): a next incarnation would
-  // wrap. The flag spares the tag's load while no id is that old.
+  // An id whose cell dies at incarnation retire_at or later is retired (never
+  // reused). Renewals go through a free id or a dying zone cell below it, so
+  // they make incarnations up to retire_at; the one other renewal, in place
+  // (fill_hole_flat_link makes a finite cell infinite, once in its life),
+  // adds one more: so the 30-bit count never wraps. The flag spares the
+  // tag's load while no id is that old.
+  static constexpr std::uint32_t retire_at = last_incarnation - 1;
   bool retires(CellId c) const {
-    return some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) == last_incarnation;
+    return some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) >= retire_at;
   }
   // A new incarnation of c, unmarked (c is being (re)made; its writer holds it).
   void renew(CellId c) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
     assert((t >> 2) < last_incarnation);  // free_cell and reserve_cells retire such ids
-    if ((t >> 2) + 1 == last_incarnation) [[unlikely]]
+    if ((t >> 2) + 1 >= retire_at) [[unlikely]]
       some_at_last_incarnation.store(true, std::memory_order_relaxed);
     tags[c].store(((t >> 2) + 1) << 2, std::memory_order_relaxed);
+  }
+  // Whether cell c's record names v, read by a thread that may not hold c
+  // (hold_cell with an anchor not from a report): a writer holding c's
+  // vertices may be writing the record meanwhile. The writers keep plain
+  // stores (the cone's 16-byte copy; 4-byte atomic stores there cost the
+  // batch 5%), so this read is the one access to a record outside the
+  // locks, and ThreadSanitizer is told not to track it. Each slot is one
+  // aligned 4-byte load, never torn; what it can see is argued at its use.
+  [[gnu::noinline, gnu::no_sanitize("thread")]] bool record_names(CellId c, VertexId v) const {
+    const volatile VertexId* slots = cells[c].v;
+    for (int i = 0; i < 4; ++i)
+      if (slots[i] == v) return true;
+    return false;
   }
   CellHandle handle_of(CellId c) const;
   int index_of(CellId c, VertexId v) const {

@@ -679,28 +679,31 @@ TEST_CASE("removal with extreme but finite coordinates", "[remove][extreme]") {
 
 TEST_CASE("a cell id at its last incarnation is retired, never wrapped to a repeated handle", "[remove][handles]") {
   // Cell incarnations are 30 bits: 2^30 reuses of one id would wrap. Push every
-  // id of a mesh to the incarnation before the last, then churn: each id is
-  // made once more (its last incarnation) and, when that cell dies, retired.
+  // id of a mesh to the incarnation before retire_at, then churn: each id is
+  // made once more (at retire_at) and, when that cell dies, retired.
   std::vector<Point3> pts = generated_points(pdt::Distribution::uniform, 300, 5);
   pdt::Triangulation t;
   std::vector<pdt::VertexId> vs;
   for (const Point3& p : pts) vs.push_back(t.insert(p).vertex);
   auto& impl = pdt::detail::impl_of(t);
-  constexpr std::uint32_t last = std::remove_reference_t<decltype(impl)>::last_incarnation;
+  using Impl = std::remove_reference_t<decltype(impl)>;
+  constexpr std::uint32_t retire_at = Impl::retire_at;
   const pdt::CellId preset = t.cell_id_bound();
-  for (pdt::CellId c = 0; c < preset; ++c) impl.tags[c].store(((last - 1) << 2) | (impl.tags[c].load() & 3));  // a free id stays marked free
+  for (pdt::CellId c = 0; c < preset; ++c)
+    impl.tags[c].store(((retire_at - 1) << 2) | (impl.tags[c].load() & 3));  // a free id stays marked free
   std::map<std::pair<pdt::CellId, std::uint32_t>, std::array<pdt::VertexId, 4>> seen;  // handle -> its cell
-  std::vector<pdt::CellHandle> at_last;
+  std::vector<pdt::CellHandle> at_retire;
   auto look = [&] {
     for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
       if (!t.is_cell(c)) continue;
       const pdt::CellHandle h = t.cell_handle(c);
-      if (c < preset) REQUIRE(h.incarnation >= last - 1);  // never wrapped to a small one
+      if (c < preset) REQUIRE(h.incarnation >= retire_at - 1);  // never wrapped to a small one
+      REQUIRE(h.incarnation <= Impl::last_incarnation);
       std::array<pdt::VertexId, 4> v{t.cell_vertex(c, 0), t.cell_vertex(c, 1), t.cell_vertex(c, 2), t.cell_vertex(c, 3)};
       std::sort(v.begin(), v.end());
       auto [it, fresh] = seen.emplace(std::pair{c, h.incarnation}, v);
       REQUIRE(it->second == v);  // one (id, incarnation), one cell
-      if (fresh && h.incarnation == last) at_last.push_back(h);
+      if (fresh && h.incarnation == retire_at) at_retire.push_back(h);
     }
   };
   std::mt19937_64 rng(9);
@@ -710,11 +713,60 @@ TEST_CASE("a cell id at its last incarnation is retired, never wrapped to a repe
     vs[k] = t.insert(pts[k]).vertex;
     look();
   }
-  CHECK(at_last.size() > 100);
+  CHECK(at_retire.size() > 100);
   std::size_t dead = 0;
-  for (const pdt::CellHandle& h : at_last) dead += !t.cell(h).has_value();
+  for (const pdt::CellHandle& h : at_retire) {
+    const bool gone = !t.cell(h).has_value();
+    dead += gone;
+    if (gone) CHECK_FALSE(t.is_cell(h.id));  // retired: that id is never made again
+  }
   CHECK(dead > 50);  // those cells died: their ids were retired, not renewed
   CHECK(t.cell_id_bound() > preset);
   require_valid(t);
+  REQUIRE(canonical_tets(t, pts) == cgal_tets(pts));
+}
+
+TEST_CASE("a cell renewed in place at retire_at (a hull vertex with a flat link removed) does not wrap",
+          "[remove][handles]") {
+  // Points on the plane z = 0, one far below (the triangulation is 3D) and an
+  // apex just above: the apex's finite link lies in the plane, so its
+  // removal turns its finite cells into infinite ones in place
+  // (fill_hole_flat_link), each a renewal on top of the allocation that made
+  // it. At retire_at, that takes it to the last incarnation, not to 0.
+  std::mt19937_64 rng(4);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Point3> pts;
+  for (int i = 0; i < 60; ++i) pts.push_back({u(rng), u(rng), 0});
+  pts.push_back({0.5, 0.5, -10});
+  pdt::Triangulation t;
+  for (const Point3& p : pts) (void)t.insert(p);
+  const pdt::VertexId apex = t.insert({0.5, 0.5, 0.05}).vertex;
+  auto& impl = pdt::detail::impl_of(t);
+  using Impl = std::remove_reference_t<decltype(impl)>;
+  std::vector<pdt::CellId> apex_cells;
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_cell(c)) continue;
+    impl.tags[c].store(Impl::retire_at << 2);  // as if allocated 2^30 - 2 times
+    for (int i = 0; i < 4; ++i)
+      if (t.cell_vertex(c, i) == apex && t.is_finite_cell(c)) apex_cells.push_back(c);
+  }
+  impl.some_at_last_incarnation.store(true);
+  REQUIRE(apex_cells.size() >= 3);
+  t.remove(apex);
+  require_valid(t);
+  std::size_t renewed = 0;
+  for (pdt::CellId c : apex_cells)
+    if (t.is_cell(c)) {  // kept in place, now infinite
+      const pdt::CellHandle h = t.cell_handle(c);
+      CHECK(h.incarnation == Impl::last_incarnation);
+      CHECK(t.cell(h).has_value());
+      ++renewed;
+    }
+  CHECK(renewed >= 3);
+  // The apex again: those cells die, and their ids retire.
+  (void)t.insert({0.5, 0.5, 0.05});
+  for (pdt::CellId c : apex_cells) CHECK_FALSE(t.is_cell(c));
+  require_valid(t);
+  pts.push_back({0.5, 0.5, 0.05});
   REQUIRE(canonical_tets(t, pts) == cgal_tets(pts));
 }

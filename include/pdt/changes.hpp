@@ -16,8 +16,8 @@
 // only grow until clear() (which resets them, and reports nothing: a refiner
 // that keeps data per cell resets it with the triangulation; handles from
 // before clear() read as dead), so a vector indexed by id (grown as needed)
-// works. An id whose cell incarnation reaches 2^30 - 1 is retired for good
-// when that cell dies rather than wrapping (one id per 2^30 reuses). Under an
+// works. An id whose cell dies at incarnation 2^30 - 2 or later is retired
+// for good rather than wrapping (one id per 2^30 reuses). Under an
 // engine, give each entry an atomic incarnation written by the hook (which
 // runs while the operation holds the cells) and read it before trusting the
 // entry.

@@ -24,7 +24,9 @@ if ! grep -q '^PDT_ALLOCATOR:[A-Z]*=pool' "$bin/CMakeCache.txt" 2>/dev/null ||
   echo "$0: $bin is not a Release build of the pool allocator (the README's tables are)" >&2
   exit 2
 fi
-rm -rf "$dir/bin" "$dir/lib" "$dir/lib.tar.xz"
+# The binaries must be the checkout's: brought up to date first (nothing to do if they are).
+cmake --build "$bin" --target $bins >/dev/null
+rm -rf "$dir/bin" "$dir/lib" "$dir/lib.tar.xz" "$dir/run"
 mkdir -p "$dir/bin" "$dir/lib"
 for b in $bins; do cp "$bin/$b" "$dir/bin/"; done
 for b in $bins; do ldd "$bin/$b"; done | awk '$3 ~ /^\// {print $3}' | sort -u |

@@ -8,28 +8,35 @@
 # file, as the lent machine's $OUT takes few. SECONDS is scaling.sh's deadline: give the
 # call a minute more.
 set -euo pipefail
-here=$(cd "$(dirname "$0")" && pwd)
-dev=${DEV:-$here/../.dev}
-if [ ! -f "$dev/lib.tar.xz" ] || [ ! -x "$dev/bin/pdt" ]; then
-  echo "$0: $dev holds no pack (run bench/device-pack.sh first, and carry $dev)" >&2
-  exit 2
-fi
-[ -d "$dev/lib" ] || tar -C "$dev" -xJf "$dev/lib.tar.xz"
-export LD_LIBRARY_PATH=$dev/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
-export BIN=$dev/bin
-export PDT_RECORD_COMMIT=${PDT_RECORD_COMMIT:-$(cat "$dev/COMMIT")}
-export PDT_RECORD_NOTE=${PDT_RECORD_NOTE:-"lent machine; Release binaries (pool allocator) built on Debian 12 at $PDT_RECORD_COMMIT, with Debian 12's libraries carried beside them (bench/device-pack.sh); stopped at the session's deadline if unfinished"}
-for b in "$BIN"/*; do
-  if ldd "$b" | grep -q 'not found'; then
-    echo "$0: $b misses libraries here:" >&2
-    ldd "$b" | grep 'not found' >&2
-    exit 2
-  fi
-done
 if [ $# -lt 1 ]; then
   echo "usage: $0 OUTDIR [SECONDS]" >&2
   exit 2
 fi
+here=$(cd "$(dirname "$0")" && pwd)
+dev=${DEV:-$here/../.dev}
+if [ ! -f "$dev/lib.tar.xz" ] || [ ! -x "$dev/bin/pdt" ] || [ ! -s "$dev/COMMIT" ]; then
+  echo "$0: $dev holds no pack (run bench/device-pack.sh first, and carry $dev)" >&2
+  exit 2
+fi
+[ -d "$dev/lib" ] || tar -C "$dev" -xJf "$dev/lib.tar.xz"
+# The carried libraries for our binaries only (wrappers), not for the system's
+# tools that the scripts call (lscpu, tar, ...), which have their own.
+wrap=$dev/run
+mkdir -p "$wrap"
+for b in "$dev"/bin/*; do
+  missing=$(LD_LIBRARY_PATH="$dev/lib" ldd "$b" | grep 'not found' || true)
+  if [ -n "$missing" ]; then
+    echo "$0: $b misses libraries here:" >&2
+    echo "$missing" >&2
+    exit 2
+  fi
+  printf '#!/bin/sh\nLD_LIBRARY_PATH="%s" exec "%s" "$@"\n' "$dev/lib" "$b" > "$wrap/$(basename "$b")"
+  chmod +x "$wrap/$(basename "$b")"
+done
+export BIN=$wrap
+commit=$(cat "$dev/COMMIT")
+export PDT_RECORD_COMMIT=${PDT_RECORD_COMMIT:-$commit}
+export PDT_RECORD_NOTE=${PDT_RECORD_NOTE:-"lent machine; Release binaries (pool allocator) built on Debian 12 at $commit, with Debian 12's libraries carried beside them (bench/device-pack.sh); stopped at the session's deadline if unfinished"}
 out=$1
 shift
 mkdir -p "$out"

@@ -297,7 +297,7 @@ Block* EngineState::claim(Worker& w) {
     return nullptr;
   };
   if (n != 0) {
-    if (w.home_cursor >= n) w.home_cursor = 0;  // a recut shrank the home
+    assert(w.home_cursor < n);  // a recut moves the blocks' bounds, not the homes' runs
     if (Block* b = home_run(first + w.home_cursor, end)) return b;
     if (Block* b = home_run(first, first + w.home_cursor)) return b;
   }

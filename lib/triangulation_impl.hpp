@@ -49,7 +49,8 @@
 //      hull is convex (the infinite cells pass the same test).
 //   I6 V - E + F - C = 0 counting the infinite vertex (a triangulated 3-sphere).
 //   I7 no live cell is marked.
-//   I8 an id below cells.size() that is not live has tag 0 or mark_free.
+//   I8 an id below cells.size() that is not live has tag 0 or mark_free (not
+//      kept by a removal's small triangulation: nothing holds handles to it).
 // Always (checked by validate()): every live vertex lies in filter's box, and
 // the filter's epsilons are those of its box (box_filter.hpp).
 // While dimension() < 3 there is no cell: the live vertices are listed in

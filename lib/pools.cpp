@@ -243,7 +243,7 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     }
     // Ids past clear() keep their incarnations: one may be at the last.
     bool any_retired = false;
-    if (some_at_last_incarnation.load(std::memory_order_relaxed))
+    if (some_id_retiring.load(std::memory_order_relaxed))
       for (std::size_t i = first; i < first + size; ++i)
         any_retired |= incarnation(static_cast<CellId>(i)) >= retire_at;
     if (!any_retired) break;

@@ -150,7 +150,7 @@ struct Triangulation::Impl {
   std::mutex spare_mutex;
   // Some cell id has reached retire_at (then reserve_cells looks for
   // such ids in the ranges it carves; clear() keeps incarnations).
-  std::atomic<bool> some_at_last_incarnation{false};
+  std::atomic<bool> some_id_retiring{false};
   detail::SpareSegments spare_cells, spare_vertices;
   std::atomic<VertexId> recent_vertex{no_vertex};  // some recently inserted vertex (a walk start)
   ChangeHook hook;                 // Triangulation::set_change_hook's, for seq
@@ -191,14 +191,14 @@ struct Triangulation::Impl {
   // tag's load while no id is that old.
   static constexpr std::uint32_t retire_at = last_incarnation - 1;
   bool retires(CellId c) const {
-    return some_at_last_incarnation.load(std::memory_order_relaxed) && incarnation(c) >= retire_at;
+    return some_id_retiring.load(std::memory_order_relaxed) && incarnation(c) >= retire_at;
   }
   // A new incarnation of c, unmarked (c is being (re)made; its writer holds it).
   void renew(CellId c) {
     const std::uint32_t t = tags[c].load(std::memory_order_relaxed);
     assert((t >> 2) < last_incarnation);  // free_cell and reserve_cells retire such ids
     if ((t >> 2) + 1 >= retire_at) [[unlikely]]
-      some_at_last_incarnation.store(true, std::memory_order_relaxed);
+      some_id_retiring.store(true, std::memory_order_relaxed);
     tags[c].store(((t >> 2) + 1) << 2, std::memory_order_relaxed);
   }
   // Whether cell c's record names v, read by a thread that may not hold c

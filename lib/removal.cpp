@@ -83,7 +83,7 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
   return OpStatus::done;
 }
 
-bool Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out, CellId until) {
+void Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out) {
   // The visited set is the context's own, not `marks`: holding v keeps these
   // cells from changing, but not from being marked by an insertion next door
   // that holds a facet of one of them (opposite v) and tests it for conflict.
@@ -95,7 +95,6 @@ bool Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<C
   out.push_back(c0);
   for (std::size_t idx = 0; idx < out.size(); ++idx) {
     CellId c = out[idx];
-    if (c == until) return true;
     for (int i = 0; i < 4; ++i) {
       if (cells[c].v[i] == v) continue;
       CellId nb = cells[c].n[i] >> 2;  // facet i contains v
@@ -109,7 +108,6 @@ bool Triangulation::Impl::collect_star(OpContext& ctx, VertexId v, std::vector<C
       }
     }
   }
-  return false;
 }
 
 // A large link (a vertex at the centre of many cospherical points, a dense

@@ -371,9 +371,8 @@ struct Triangulation::Impl {
   static constexpr std::size_t large_link = 256;
   void order_link(OpContext& ctx);
   // The cells incident to v (v held by ctx, shared or exclusively) into out,
-  // in order of discovery (ctx.star_seen holds them). With `until` a cell id:
-  // stops when it is met (then returns true; out holds the cells met so far).
-  bool collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out, CellId until = no_cell);
+  // in order of discovery (ctx.star_seen holds them).
+  void collect_star(OpContext& ctx, VertexId v, std::vector<CellId>& out);
   void fill_hole_flat_link(OpContext& ctx, VertexId v);
   void sew_link_triangulation(OpContext& ctx, VertexId v);
   // A link vertex's id in the link triangulation (remove_3d numbered it).

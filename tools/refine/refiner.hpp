@@ -103,7 +103,8 @@ struct MeshQuality {
   std::uint64_t slivers = 0, slivers_judged = 0;
 };
 // The samples are those refine() used (the same size and seed). threads > 1
-// judges the cells on that many threads (the same result).
+// judges the cells on that many threads, at most one per core (the same
+// result).
 MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, double ratio, std::uint64_t seed,
                     unsigned threads = 1);
 

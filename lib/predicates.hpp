@@ -109,12 +109,12 @@ inline int filtered_orient(const KPoint& p, const KPoint& q, const KPoint& r, co
   return orient_semi_static(p, q, r, s, det);
 }
 
-// CGAL::side_of_oriented_sphere(p, q, r, s, t).
-inline int filtered_side_of_sphere(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s,
-                                   const KPoint& t, double eps) {
-  if (!(eps < std::numeric_limits<double>::infinity())) return side_of_sphere_out_of_line(p, q, r, s, t);
-  // Static_filters/Side_of_oriented_sphere_3.h: the same differences and
-  // squared norms, the same determinant (rows p, r, q, s).
+// The determinant of CGAL's static filter for side_of_oriented_sphere(p, q,
+// r, s, t) (Static_filters/Side_of_oriented_sphere_3.h): the same
+// differences and squared norms, the same determinant (rows p, r, q, s), so
+// the box's epsilon bounds its rounding error (box_filter.hpp).
+inline double side_of_sphere_det(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s,
+                                 const KPoint& t) {
   const double ptx = p.x() - t.x(), pty = p.y() - t.y(), ptz = p.z() - t.z();
   const double pt2 = CGAL::square(ptx) + CGAL::square(pty) + CGAL::square(ptz);
   const double qtx = q.x() - t.x(), qty = q.y() - t.y(), qtz = q.z() - t.z();
@@ -123,11 +123,29 @@ inline int filtered_side_of_sphere(const KPoint& p, const KPoint& q, const KPoin
   const double rt2 = CGAL::square(rtx) + CGAL::square(rty) + CGAL::square(rtz);
   const double stx = s.x() - t.x(), sty = s.y() - t.y(), stz = s.z() - t.z();
   const double st2 = CGAL::square(stx) + CGAL::square(sty) + CGAL::square(stz);
-  const double det =
-      CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
+  return CGAL::determinant(ptx, pty, ptz, pt2, rtx, rty, rtz, rt2, qtx, qty, qtz, qt2, stx, sty, stz, st2);
+}
+
+// CGAL::side_of_oriented_sphere(p, q, r, s, t).
+inline int filtered_side_of_sphere(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s,
+                                   const KPoint& t, double eps) {
+  if (!(eps < std::numeric_limits<double>::infinity())) return side_of_sphere_out_of_line(p, q, r, s, t);
+  const double det = side_of_sphere_det(p, q, r, s, t);
   if (det > eps) return 1;
   if (det < -eps) return -1;
   return side_of_sphere_semi_static(p, q, r, s, t, det);
+}
+
+// The box filter's verdict alone on CGAL::side_of_oriented_sphere(p, q, r,
+// s, t): its sign when the determinant is beyond eps, 0 when the filter
+// cannot decide (then filtered_side_of_sphere decides). The same
+// determinant as filtered_side_of_sphere, so a nonzero verdict is that
+// function's answer; computed without a branch on the sign, so that several
+// can be in flight before one is acted on.
+inline int box_side_of_sphere(const KPoint& p, const KPoint& q, const KPoint& r, const KPoint& s, const KPoint& t,
+                              double eps) {
+  const double det = side_of_sphere_det(p, q, r, s, t);
+  return static_cast<int>(det > eps) - static_cast<int>(det < -eps);
 }
 
 inline bool lex_less(const KPoint* a, const KPoint* b) { return CGAL::compare_xyz(*a, *b) == CGAL::SMALLER; }

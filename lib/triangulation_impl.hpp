@@ -327,6 +327,15 @@ struct Triangulation::Impl {
   // Is c in conflict with p: p inside c's perturbed circumsphere (an infinite
   // cell: beyond its hull facet, or on its plane inside its circumcircle)?
   bool in_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const;
+  // in_conflict's answer when the box filter alone gives it for a finite c
+  // (+1 in conflict, -1 not), else 0 (an infinite cell, a determinant
+  // within eps, no box): ask in_conflict. No branch on the answer, so a
+  // cell's neighbours are tested side by side (gather_conflict_zone).
+  int quick_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const {
+    const CellRec& cr = cells[c];
+    if ((cr.v[0] == 0) | (cr.v[1] == 0) | (cr.v[2] == 0) | (cr.v[3] == 0)) return 0;
+    return detail::box_side_of_sphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p, eps.insphere);
+  }
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
   // parallel: an engine's equal slots, built in the current TBB arena (with the world stopped).
   // most: an engine's cap; follow: an engine's tree whatever the crowding.

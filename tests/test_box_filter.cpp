@@ -30,6 +30,7 @@ constexpr double inf = std::numeric_limits<double>::infinity();
 struct Counts {
   long decided = 0;  // tests the box's epsilon decided (no call to CGAL)
   long tests = 0;
+  long undecided_spheres = 0;  // in-sphere tests box_side_of_sphere left to CGAL, with a box
 };
 
 // Every orientation and in-sphere test among groups of pts, with the filter of
@@ -52,6 +53,11 @@ void check_against_cgal(const std::vector<KPoint>& pts, std::mt19937_64& rng, Co
     REQUIRE(o == static_cast<int>(CGAL::orientation(a, b, c, d)));
     const int s = pdt::detail::filtered_side_of_sphere(a, b, c, d, q, e.insphere);
     REQUIRE(s == static_cast<int>(CGAL::side_of_oriented_sphere(a, b, c, d, q)));
+    // The verdict alone (gather_conflict_zone's first pass): CGAL's sign or
+    // nothing, and nothing only where the box's epsilon does not decide.
+    const int v = pdt::detail::box_side_of_sphere(a, b, c, d, q, e.insphere);
+    REQUIRE((v == 0 || v == s));
+    if (e.insphere < inf && v == 0) ++counts.undecided_spheres;
     counts.tests += 2;
     counts.decided += (o != 0 && e.orient < inf) + (s != 0 && e.insphere < inf);
   }
@@ -114,6 +120,7 @@ TEST_CASE("box filter: the sign is CGAL's at every scale, uniform points") {
   // The filter must decide most tests where CGAL's semi-static bound would.
   INFO(counts.decided << " of " << counts.tests << " decided by the box");
   CHECK(counts.decided > counts.tests / 4);
+  CHECK(counts.undecided_spheres < counts.tests / 4);  // the verdict alone decides most
 }
 
 TEST_CASE("box filter: the sign is CGAL's for elongated boxes and tiny clusters in large boxes") {

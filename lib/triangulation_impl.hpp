@@ -332,8 +332,8 @@ struct Triangulation::Impl {
   // within eps, no box): ask in_conflict. No branch on the answer, so a
   // cell's neighbours are tested side by side (gather_conflict_zone).
   int quick_conflict(CellId c, const KPoint& p, const detail::FilterEps& eps) const {
+    if (cell_infinite(c)) return 0;
     const CellRec& cr = cells[c];
-    if ((cr.v[0] == 0) | (cr.v[1] == 0) | (cr.v[2] == 0) | (cr.v[3] == 0)) return 0;
     return detail::box_side_of_sphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p, eps.insphere);
   }
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted

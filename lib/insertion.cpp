@@ -205,25 +205,49 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
 
 namespace {
 
-// For the cone's cell over boundary facet f (v at position f): its facets
-// through v, each with the directed boundary edge (x, y) that follows v in the
-// facet's cyclic order (facet_vertex), as positions in the cell.
-struct ConeFacet {
-  int k, x, y;
-};
-constexpr auto cone_facets = [] {
-  std::array<std::array<ConeFacet, 3>, 4> out{};
+// The cone's cell over the boundary facet that was facet f of a zone cell x
+// is (v, x[t[0]], x[t[1]], x[t[2]]) with t = cone_order[f]: v first, then
+// the facet's vertices in an order that keeps the orientation of x with v in
+// place of x[f] (the reverse of facet_vertex[f], a cyclic shift of which
+// makes an even permutation). So every cone cell has v at 0, its boundary
+// facet is its facet 0, and its facets through v are fixed: facet k holds v
+// and the directed edge (cone_edges[k].x, cone_edges[k].y) that follows v in
+// facet_vertex[k]'s cyclic order.
+constexpr auto cone_order = [] {
+  std::array<std::array<int, 3>, 4> out{};
   for (int f = 0; f < 4; ++f) {
-    int i = 0;
-    for (int k = 0; k < 4; ++k) {
-      if (k == f) continue;
-      const int* fv = detail::facet_vertex[k];
-      const int j = fv[0] == f ? 0 : fv[1] == f ? 1 : 2;
-      out[f][i++] = {k, fv[(j + 1) % 3], fv[(j + 2) % 3]};
-    }
+    const int* fv = detail::facet_vertex[f];
+    out[f] = {fv[0], fv[2], fv[1]};
   }
   return out;
 }();
+struct ConeEdge {
+  int k, x, y;
+};
+constexpr auto cone_edges = [] {
+  std::array<ConeEdge, 3> out{};
+  for (int k = 1; k < 4; ++k) {
+    const int* fv = detail::facet_vertex[k];
+    const int j = fv[0] == 0 ? 0 : fv[1] == 0 ? 1 : 2;
+    out[k - 1] = {k, fv[(j + 1) % 3], fv[(j + 2) % 3]};
+  }
+  return out;
+}();
+// Checked at compile time: each cone cell lists its vertices as an even
+// permutation of the zone cell's (with v in place of x[f]).
+constexpr bool cone_order_is_even() {
+  for (int f = 0; f < 4; ++f) {
+    const int perm[4] = {f, cone_order[f][0], cone_order[f][1], cone_order[f][2]};
+    int inversions = 0;
+    for (int a = 0; a < 4; ++a)
+      for (int b = a + 1; b < 4; ++b) inversions += perm[a] > perm[b];
+    if (inversions % 2 != 0) return false;
+  }
+  return true;
+}
+static_assert(cone_order_is_even());
+static_assert(cone_edges[0].x == 2 && cone_edges[0].y == 3 && cone_edges[1].x == 3 && cone_edges[1].y == 1 &&
+              cone_edges[2].x == 1 && cone_edges[2].y == 2);
 
 }  // namespace
 
@@ -255,17 +279,16 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
       nc = alloc_cell(ctx);
     }
     note_created(ctx, nc);
+    // bf.v becomes the cone cell's vertices (cone_order), for link_cone too.
+    const std::array<int, 3>& t = cone_order[bf.facet];
+    const VertexId a = bf.v[t[0]], b = bf.v[t[1]], c = bf.v[t[2]];
+    bf.v[0] = v, bf.v[1] = a, bf.v[2] = b, bf.v[3] = c;
     CellRec& r = cells[nc];
-    // bf.v whole into the cell, then v in place in both: the other order
-    // (v into bf.v, then the 16-byte copy) stalls each copy on a store that
-    // cannot be forwarded to a wider load.
     std::memcpy(r.v, bf.v, sizeof r.v);
-    r.v[bf.facet] = v;
-    bf.v[bf.facet] = v;
-    set_adjacency(nc, bf.facet, bf.outer >> 2, static_cast<int>(bf.outer & 3));
+    set_adjacency(nc, 0, bf.outer >> 2, static_cast<int>(bf.outer & 3));
     bool finite = true;
-    for (int i = 0; i < 3; ++i) {  // the facet's vertices; v's own below
-      const VertexId w = bf.v[detail::facet_vertex[bf.facet][i]];
+    for (int i = 1; i < 4; ++i) {  // the facet's vertices; v's own below
+      const VertexId w = bf.v[i];
       if (w == 0) {
         finite = false;
         continue;
@@ -277,27 +300,27 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
     bf.outer = nc;  // from here on: the new cell
   }
   verts[v].cell = ctx.boundary.back().outer;
-  verts[v].scratch = 0;
   link_cone(ctx);
   ctx.stats.cells_created_by_insert += facets;
 }
 
 void Triangulation::Impl::link_cone(OpContext& ctx) {
-  // The new cells' facets through v pair up: facet k of new cell c holds v
-  // and one boundary edge, seen from c as the directed edge (x, y) that
-  // follows v in the facet's cyclic order; the cell across sees (y, x)
-  // (storage.hpp: a shared facet is listed in opposite cyclic orders). Every
-  // directed edge of the closed boundary surface occurs exactly once, so a
-  // table indexed by directed edge needs no clearing: all writes, then all
-  // reads. The cone's vertices are numbered in their scratch words (zeroed
-  // by cone_from_vertex), which this operation owns: it holds them
-  // exclusively. The infinite vertex, which nobody locks, keeps number 0
-  // and its scratch is never written.
+  // The new cells' facets through v pair up: facet k (1..3) of new cell c
+  // holds v and one boundary edge, seen from c as the directed edge (x, y)
+  // that follows v in the facet's cyclic order (cone_edges); the cell across
+  // sees (y, x) (storage.hpp: a shared facet is listed in opposite cyclic
+  // orders). Every directed edge of the closed boundary surface occurs
+  // exactly once, so a table indexed by directed edge needs no clearing: all
+  // writes, then all reads. The boundary's vertices are numbered in their
+  // scratch words (zeroed by cone_from_vertex), which this operation owns: it
+  // holds them exclusively. The infinite vertex, which nobody locks, keeps
+  // number 0 and its scratch is never written; v is in no boundary edge and
+  // gets no number.
   std::vector<OpContext::BoundaryFacet>& bnd = ctx.boundary;
   constexpr std::uint32_t ids = OpContext::cone_ids;
   std::uint32_t next = 1;
   for (const OpContext::BoundaryFacet& bf : bnd)
-    for (int t = 0; t < 4; ++t) {
+    for (int t = 1; t < 4; ++t) {
       const VertexId w = bf.v[t];
       if (w == 0) continue;
       std::uint32_t& s = verts[w].scratch;
@@ -311,27 +334,27 @@ void Triangulation::Impl::link_cone(OpContext& ctx) {
     std::uint32_t* table = ctx.cone_edge.data();
     const std::uint32_t stride = next;
     for (OpContext::BoundaryFacet& bf : bnd)
-      for (VertexId& w : bf.v) w = verts[w].scratch;  // bf.v now holds numbers
+      for (int t = 1; t < 4; ++t) bf.v[t] = verts[bf.v[t]].scratch;  // bf.v[1..3] now hold numbers
     for (const OpContext::BoundaryFacet& bf : bnd)
-      for (const ConeFacet& cf : cone_facets[bf.facet])
-        table[stride * bf.v[cf.x] + bf.v[cf.y]] = 4 * bf.outer + static_cast<std::uint32_t>(cf.k);
+      for (const ConeEdge& ce : cone_edges)
+        table[stride * bf.v[ce.x] + bf.v[ce.y]] = 4 * bf.outer + static_cast<std::uint32_t>(ce.k);
     for (const OpContext::BoundaryFacet& bf : bnd)
-      for (const ConeFacet& cf : cone_facets[bf.facet]) {
-        const std::uint32_t across = table[stride * bf.v[cf.y] + bf.v[cf.x]];
-        assert(cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.x] &&
-               cells[across >> 2].v[across & 3] != cells[bf.outer].v[cf.y]);
-        cells[bf.outer].n[cf.k] = across;
+      for (const ConeEdge& ce : cone_edges) {
+        const std::uint32_t across = table[stride * bf.v[ce.y] + bf.v[ce.x]];
+        assert(cells[across >> 2].v[across & 3] != cells[bf.outer].v[ce.x] &&
+               cells[across >> 2].v[across & 3] != cells[bf.outer].v[ce.y]);
+        cells[bf.outer].n[ce.k] = across;
       }
     return;
   }
   detail::IdMap& edges = ctx.new_cell_by_edge;  // reserved by the caller for 3 entries per facet
   edges.clear();
   for (const OpContext::BoundaryFacet& bf : bnd)
-    for (const ConeFacet& cf : cone_facets[bf.facet]) {
+    for (const ConeEdge& ce : cone_edges) {
       bool inserted = false;
-      const std::uint32_t val = edges.get_or_insert(edge_key(bf.v[cf.x], bf.v[cf.y]),
-                                                    4 * bf.outer + static_cast<std::uint32_t>(cf.k), &inserted);
-      if (!inserted) set_adjacency(bf.outer, cf.k, val >> 2, static_cast<int>(val & 3));
+      const std::uint32_t val = edges.get_or_insert(edge_key(bf.v[ce.x], bf.v[ce.y]),
+                                                    4 * bf.outer + static_cast<std::uint32_t>(ce.k), &inserted);
+      if (!inserted) set_adjacency(bf.outer, ce.k, val >> 2, static_cast<int>(val & 3));
     }
 }
 

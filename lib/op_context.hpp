@@ -84,9 +84,9 @@ struct OpContext {
   // Insertion: the conflict zone (cells whose circumsphere holds the point),
   // its boundary facets, and the new cells by the boundary edge they contain.
   struct BoundaryFacet {
-    VertexId v[4];        // the new cell's vertices
+    VertexId v[4];        // the zone cell's vertices; cone_from_vertex: the new cell's (the new vertex first)
     std::uint32_t outer;  // 4*outer cell + mirror facet; cone_from_vertex: then the new cell
-    int facet;            // index of the boundary facet in the new cell
+    int facet;            // index of the boundary facet in the zone cell
   };
   std::vector<CellId> conflict_zone;
   std::vector<BoundaryFacet> boundary;

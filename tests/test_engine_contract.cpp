@@ -422,9 +422,19 @@ TEST_CASE("contract: a cell handle names its cell only while it lives, through i
   CHECK(refused.load() == n);
   // Cleared, then fewer points than before: some old ids come back as cells
   // and as anchors, others stay unused; no old handle names a cell.
+  // Each cell's handle with its lowest finite vertex as the anchor (any of
+  // its vertices names it): so that ids of the first points come back.
   std::vector<pdt::CellHandle> before;
-  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c)
-    if (t.is_cell(c)) before.push_back(t.cell_handle(c));
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_cell(c)) continue;
+    pdt::CellHandle h = t.cell_handle(c);
+    for (int i = 0; i < 4; ++i) {
+      const pdt::VertexId w = t.cell_vertex(c, i);
+      if (w != pdt::infinite_vertex && w < h.anchor) h.anchor = w;
+    }
+    REQUIRE(t.cell(h).has_value());
+    before.push_back(h);
+  }
   t.clear();
   for (std::size_t i = 0; i < pts.size() / 2; ++i) (void)t.insert(pts[i]);
   REQUIRE(t.cell_id_bound() < before.size());

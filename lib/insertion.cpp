@@ -207,12 +207,13 @@ namespace {
 
 // The cone's cell over the boundary facet that was facet f of a zone cell x
 // is (v, x[t[0]], x[t[1]], x[t[2]]) with t = cone_order[f]: v first, then
-// the facet's vertices in an order that keeps the orientation of x with v in
-// place of x[f] (the reverse of facet_vertex[f], a cyclic shift of which
-// makes an even permutation). So every cone cell has v at 0, its boundary
-// facet is its facet 0, and its facets through v are fixed: facet k holds v
-// and the directed edge (cone_edges[k].x, cone_edges[k].y) that follows v in
-// facet_vertex[k]'s cyclic order.
+// the facet's vertices in facet_vertex[f]'s cyclic order reversed, which
+// keeps the orientation of x with v in place of x[f] (the positions
+// (f, t[0], t[1], t[2]) are an even permutation of (0, 1, 2, 3): asserted
+// below). So every cone cell has v at 0, its boundary facet is its facet 0
+// and lists the facet's vertices in x's cyclic order, and its facets through
+// v are fixed: cone_edges[k - 1] says that facet k (1..3) holds v and the
+// directed edge (x, y) that follows v in facet_vertex[k]'s cyclic order.
 constexpr auto cone_order = [] {
   std::array<std::array<int, 3>, 4> out{};
   for (int f = 0; f < 4; ++f) {
@@ -280,11 +281,14 @@ void Triangulation::Impl::cone_from_vertex(OpContext& ctx, VertexId v) {
     }
     note_created(ctx, nc);
     // bf.v becomes the cone cell's vertices (cone_order), for link_cone too.
+    // Built aside and copied whole to both: storing into bf.v and then
+    // copying it would make each 16-byte load wait on four 4-byte stores it
+    // cannot be forwarded from (compilers differ on whether they avoid it).
     const std::array<int, 3>& t = cone_order[bf.facet];
-    const VertexId a = bf.v[t[0]], b = bf.v[t[1]], c = bf.v[t[2]];
-    bf.v[0] = v, bf.v[1] = a, bf.v[2] = b, bf.v[3] = c;
+    const VertexId made[4] = {v, bf.v[t[0]], bf.v[t[1]], bf.v[t[2]]};
     CellRec& r = cells[nc];
-    std::memcpy(r.v, bf.v, sizeof r.v);
+    std::memcpy(r.v, made, sizeof r.v);
+    std::memcpy(bf.v, made, sizeof bf.v);
     set_adjacency(nc, 0, bf.outer >> 2, static_cast<int>(bf.outer & 3));
     bool finite = true;
     for (int i = 1; i < 4; ++i) {  // the facet's vertices; v's own below

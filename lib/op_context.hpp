@@ -91,8 +91,8 @@ struct OpContext {
   std::vector<CellId> conflict_zone;
   std::vector<BoundaryFacet> boundary;
   // The cone's internal facets, matched by the boundary edge they contain:
-  // with at most cone_ids boundary vertices numbered 0..cone_ids-1 (0 the
-  // infinite vertex's), cone_edge[cone_ids * a + b] is 4 * new cell + facet
+  // with the boundary's n vertices numbered 0..n-1 (0 the infinite
+  // vertex's; n <= cone_ids), cone_edge[n * a + b] is 4 * new cell + facet
   // for the facet that sees the directed edge (a, b); larger cones use the map.
   static constexpr std::uint32_t cone_ids = 64;
   std::vector<std::uint32_t> cone_edge;

@@ -110,6 +110,7 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
     ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
     begin_report(ctx, ctx.boundary.size(), ctx.conflict_zone.size());
   } catch (...) {
+    clear_zone_marks(ctx);
     release_all(ctx);
     throw;
   }
@@ -131,12 +132,18 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
   // connected, star-shaped conflict zone; search it breadth first. c0 is held
   // exclusively; each cell joining the zone is locked exclusively before its
   // own neighbours are read. Marks: in for the zone, out for a cell found
-  // outside it; every mark set here is cleared before returning.
+  // outside it; every mark set here is cleared before returning, but for the
+  // zone's when the search is done: the cone renews or frees every zone
+  // cell, which clears its mark, and a caller that does not get that far
+  // clears them (clear_zone_marks).
   std::vector<CellId>& zone = ctx.conflict_zone;
   zone.clear();
   ctx.boundary.clear();
   auto unmark = [&] {
     for (CellId c : zone) set_mark(c, 0);
+    for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
+  };
+  auto unmark_outside = [&] {
     for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
   };
   auto fetch_neighbours = [&](CellId c) {  // their records and tags, for when c is searched
@@ -199,7 +206,10 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
     unmark();
     throw;
   }
-  unmark();
+  if (status == OpStatus::done)
+    unmark_outside();
+  else
+    unmark();
   return status;
 }
 

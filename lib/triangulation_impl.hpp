@@ -20,7 +20,9 @@
 //             id per 2^30 allocations of it), so the 30-bit count never
 //             wraps (retire_at). The mark (1 in, 2 out)
 //             is set by a conflict-zone search on the cells it meets and
-//             cleared before the search returns, so outside a search every
+//             cleared before the search returns (a zone found whole keeps
+//             its marks until the cone that replaces it renews or frees its
+//             cells, in the same operation), so outside an operation every
 //             live cell's mark is 0 (I7). A dead id's mark is 3 (free_cell,
 //             clear()) until renew() makes it live again, or its tag is 0
 //             (never allocated): so a tag holding a handle's incarnation with
@@ -367,7 +369,13 @@ struct Triangulation::Impl {
   OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
                   const CellHandle* only_if_alive = nullptr);
   // Marks are cleared before it returns, whatever it returns.
+  // Done: the zone's cells keep their marks (in) until cone_from_vertex
+  // renews or frees them; a caller that stops before clears them with
+  // clear_zone_marks. Otherwise no mark is left.
   OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0, const detail::FilterEps& eps);
+  void clear_zone_marks(OpContext& ctx) {
+    for (CellId c : ctx.conflict_zone) set_mark(c, 0);
+  }
   void cone_from_vertex(OpContext& ctx, VertexId v);
   void link_cone(OpContext& ctx);  // the cone's internal adjacencies (boundary[i].outer = new cell)
 

@@ -368,10 +368,9 @@ struct Triangulation::Impl {
   // operation, since the cell's anchor stays held in between.
   OpStatus insert(OpContext& ctx, const KPoint& p, VertexId hint, Inserted& out,
                   const CellHandle* only_if_alive = nullptr);
-  // Marks are cleared before it returns, whatever it returns.
-  // Done: the zone's cells keep their marks (in) until cone_from_vertex
-  // renews or frees them; a caller that stops before clears them with
-  // clear_zone_marks. Otherwise no mark is left.
+  // The marks it sets are cleared before it returns, but when it is done,
+  // the zone's cells keep theirs (in) until cone_from_vertex renews or frees
+  // them; a caller that stops before that clears them with clear_zone_marks.
   OpStatus gather_conflict_zone(OpContext& ctx, const KPoint& p, CellId c0, const detail::FilterEps& eps);
   void clear_zone_marks(OpContext& ctx) {
     for (CellId c : ctx.conflict_zone) set_mark(c, 0);

@@ -17,7 +17,11 @@ import csv
 import sys
 from collections import defaultdict
 
-import matplotlib
+try:
+    import matplotlib
+except ImportError:
+    sys.exit("plot_results: needs matplotlib: run scripts/install-deps.sh --extras "
+             "(Debian's python3-matplotlib), then /usr/bin/python3 bench/plot_results.py FILE.csv")
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -169,7 +173,10 @@ def main():
     if len(sys.argv) < 2:
         sys.exit(__doc__)
     for path in sys.argv[1:]:
-        rows = load(path)
+        try:
+            rows = load(path)
+        except OSError as e:
+            sys.exit(f"plot_results: cannot read {path}: {e.strerror}")
         if not rows:
             sys.exit(f"plot_results: {path} has no rows")
         machine = "16 cores" if "16cores" in path else "2 cores" if "2cores" in path else path

@@ -139,12 +139,12 @@ OpStatus Triangulation::Impl::gather_conflict_zone(OpContext& ctx, const KPoint&
   std::vector<CellId>& zone = ctx.conflict_zone;
   zone.clear();
   ctx.boundary.clear();
-  auto unmark = [&] {
-    for (CellId c : zone) set_mark(c, 0);
-    for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
-  };
   auto unmark_outside = [&] {
     for (const OpContext::BoundaryFacet& bf : ctx.boundary) set_mark(bf.outer >> 2, 0);
+  };
+  auto unmark = [&] {
+    clear_zone_marks(ctx);
+    unmark_outside();
   };
   auto fetch_neighbours = [&](CellId c) {  // their records and tags, for when c is searched
     for (int j = 0; j < 4; ++j) {

@@ -462,9 +462,11 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   // In the caller's arena, not the engine's: entering a full arena waits for
   // its threads, which a hook may hold on a lock the caller has.
   shared->index = detail::spatial_order(points, true);
-  shared->points.resize(points.size());
-  std::vector<std::uint32_t> block_at(points.size());  // the block of sorted point k
-  detail::for_range(points.size(), true, [&, sorted = shared->points.data(), index = shared->index.data()](
+  shared->points = detail::make_raw_array<Point3>(points.size());  // first touched by the loop below
+  shared->point_count = points.size();
+  const detail::RawArray<std::uint32_t> block_at =
+      detail::make_raw_array<std::uint32_t>(points.size());  // the block of sorted point k
+  detail::for_range(points.size(), true, [&, sorted = shared->points.get(), index = shared->index.data()](
                                                std::size_t begin, std::size_t end) {
     // Two loops: the gather alone keeps many of its cache misses in flight.
     for (std::size_t k = begin; k < end; ++k) sorted[k] = points[index[k]];
@@ -472,12 +474,13 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   });
   shared->fn = std::move(done);
   shared->remaining.store(points.size());
-  const std::vector<Point3>& sorted = shared->points;
+  const std::size_t count = shared->point_count;
+  const Point3* sorted = shared->points.get();
   std::vector<OpRecord*> runs;
   try {
-    for (std::size_t k = 0; k < sorted.size();) {
+    for (std::size_t k = 0; k < count;) {
       std::size_t end = k + 1;
-      while (end < sorted.size() && end - k < EngineState::max_run && block_at[end] == block_at[k]) ++end;
+      while (end < count && end - k < EngineState::max_run && block_at[end] == block_at[k]) ++end;
       runs.push_back(nullptr);
       OpRecord* op = runs.back() = e.records.acquire();
       op->kind = OpKind::insert;

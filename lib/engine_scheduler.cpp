@@ -146,7 +146,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         b->queued.fetch_sub(1, std::memory_order_relaxed);
         if (op->run_end) {
           const bool same_batch = reinterpret_cast<std::uintptr_t>(op->batch_done) == w.batch_taken;
-          const std::size_t n = op->batch_done->points.size();
+          const std::size_t n = op->batch_done->point_count;
           if (took_run && same_batch && brio_round(op->run_next, n) != brio_round(w.batch_taken_end - 1, n)) {
             count_in_front(*b, op);  // a later round: after this worker's other blocks
             w.repeat = max_repeat;   // claim() starts at the next block

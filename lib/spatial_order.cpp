@@ -25,6 +25,7 @@
 #include "box_lattice.hpp"
 #include "for_range.hpp"
 #include "mix64.hpp"
+#include "raw_array.hpp"
 
 namespace pdt::detail {
 
@@ -246,7 +247,7 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   // Keys in the points' order (reading them in the shuffled order would miss
   // the cache at each one), then the shuffle: Fisher-Yates from a fixed seed,
   // so the order (and the vertex ids it hands out) is the same on every run.
-  std::vector<Keyed> items(n);
+  const RawArray<Keyed> items = make_raw_array<Keyed>(n);  // each written below, in parallel
   auto lattice_point = [&](std::size_t i, std::uint32_t x[3]) {
     const double c[3] = {points[i].x, points[i].y, points[i].z};
     for (int a = 0; a < 3; ++a) x[a] = static_cast<std::uint32_t>(lattice.index(a, c[a]));
@@ -292,9 +293,9 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
     const std::size_t begin = brio_round_begin(end);
     const unsigned chunks = static_cast<unsigned>(std::min<std::size_t>(threads, (end - begin) / 4096));
     if (chunks > 1)
-      radix_sort_parallel(items.data() + begin, end - begin, scratch.items, chunks);
+      radix_sort_parallel(items.get() + begin, end - begin, scratch.items, chunks);
     else
-      radix_sort(items.data() + begin, end - begin, scratch.items);
+      radix_sort(items.get() + begin, end - begin, scratch.items);
     end = begin;
   }
   // Keys too coarse for the points (a cluster far smaller than the box, or a

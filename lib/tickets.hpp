@@ -56,6 +56,7 @@
 #include <vector>
 
 #include "op_record.hpp"
+#include "raw_array.hpp"
 #include "storage.hpp"
 #include "stable_array.hpp"
 
@@ -89,7 +90,7 @@ struct TicketRange {
   std::uint64_t first = 0;
   std::uint32_t n = 0;
   std::uint32_t capacity = 0;  // slots allocated: n, or more once a close has shrunk n
-  std::unique_ptr<TicketSlot[]> slots;        // slot k: the k-th ticket to run (ticket first + k if no position)
+  RawArray<TicketSlot> slots;                 // slot k: the k-th ticket to run (ticket first + k if no position); all written by make_range
   std::unique_ptr<std::uint32_t[]> position;  // position[t - first]: t's slot; null: slot t - first
   std::uint32_t slot_of(std::uint64_t t) const {
     return position ? position[t - first] : static_cast<std::uint32_t>(t - first);
@@ -246,9 +247,11 @@ class TicketTable {
   // A range of n slots for tickets [first, first + n), keyed, all counted
   // live and pending: in run order if `order` is given (slot k holds ticket
   // first + order[k]; position set), else in ticket order (position null).
+  // parallel: its slots are written on the arena's threads (never under a
+  // mutex: the calling thread may take other tasks meanwhile).
   // Throws std::bad_alloc.
   static std::unique_ptr<TicketRange> make_range(std::uint64_t first, std::uint32_t n,
-                                                 const std::uint32_t* order = nullptr);
+                                                 const std::uint32_t* order = nullptr, bool parallel = false);
   // Shrinks the open range to the tickets it gave out and forgets it. The
   // caller holds issue_mutex_ and every shard mutex. Returns the range's
   // first ticket if it is now worth compacting, else no_range.

@@ -8,9 +8,12 @@
 // swept from ranges too.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <numeric>
 #include <random>
 #include <string>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include "pdt/error.hpp"
@@ -337,4 +340,55 @@ TEST_CASE("tickets: a sweep erases the ranged tickets whose vertex is gone, and 
     else
       REQUIRE(error_of([&] { (void)table.result(t, v.verts); }) == pdt::ErrorCode::invalid_argument);
   }
+}
+
+TEST_CASE("tickets: large batches issued from several threads at once, beside single tickets, get disjoint "
+          "consecutive tickets and slots in their own run order",
+          "[tickets]") {
+  // A large batch's range is made outside the table's mutex (in parallel)
+  // for the tickets next at that moment, and made again when another issue
+  // came first: whatever the interleaving, every ticket is issued once.
+  TicketTable table;
+  struct Batch {
+    std::vector<std::uint32_t> order;
+    TicketTable::Issued issued;
+  };
+  constexpr unsigned threads = 4, batches = 3, singles = 40;
+  std::vector<std::vector<Batch>> made(threads);
+  std::vector<std::vector<std::uint64_t>> single_tickets(threads);
+  std::vector<std::thread> pool;
+  for (unsigned i = 0; i < threads; ++i)
+    pool.emplace_back([&, i] {
+      for (unsigned b = 0; b < batches; ++b) {
+        Batch batch{run_order(TicketTable::range_min + 997 * i + 131 * b, 10 * i + b), {}};
+        batch.issued = table.issue_ordered(batch.order);
+        made[i].push_back(std::move(batch));
+        for (unsigned s = 0; s < singles; ++s) single_tickets[i].push_back(table.issue(1).first);
+      }
+    });
+  for (std::thread& t : pool) t.join();
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> spans;  // [first, end) of every issue
+  for (unsigned i = 0; i < threads; ++i) {
+    for (const Batch& b : made[i]) {
+      const std::size_t n = b.order.size();
+      spans.emplace_back(b.issued.first, b.issued.first + n);
+      REQUIRE(b.issued.range->first == b.issued.first);
+      REQUIRE(b.issued.range->n == n);
+      for (std::uint32_t k = 0; k < n; ++k) {
+        const std::uint64_t t = b.issued.first + b.order[k];
+        REQUIRE(b.issued.range->slot_of(t) == k);
+        REQUIRE(b.issued.range->slots[k].key == t + 1);
+        REQUIRE(b.issued.range->slots[k].state == TicketState::pending);
+      }
+    }
+    for (std::uint64_t t : single_tickets[i]) spans.emplace_back(t, t + 1);
+  }
+  std::sort(spans.begin(), spans.end());
+  std::uint64_t next = 0;
+  for (const auto& [first, end] : spans) {
+    REQUIRE(first == next);  // no ticket twice, none skipped
+    next = end;
+  }
+  REQUIRE(next == table.issued());
+  REQUIRE(table.live() == table.issued());
 }

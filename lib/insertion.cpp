@@ -103,18 +103,20 @@ OpStatus Triangulation::Impl::insert(OpContext& ctx, const KPoint& p, VertexId h
   if (!lock_cell_exclusive(ctx, c)) return rollback();
   if (gather_conflict_zone(ctx, p, c, eps) != OpStatus::done) return rollback();
   // Everything the change needs, before its first write: cells, map room,
-  // report room, the vertex. A failure here changes nothing.
+  // report room, the vertex (a fresh chunk of ids may fail to come: the
+  // zone's marks must go then too). A failure here changes nothing.
+  VertexId v = no_vertex;
   try {
     reserve_cells(ctx, ctx.boundary.size());
     PDT_FAULT_POINT("edge map");
     ctx.new_cell_by_edge.reserve_for(3 * ctx.boundary.size());
     begin_report(ctx, ctx.boundary.size(), ctx.conflict_zone.size());
+    v = alloc_vertex(ctx, p);
   } catch (...) {
     clear_zone_marks(ctx);
     release_all(ctx);
     throw;
   }
-  VertexId v = alloc_vertex(ctx, p);  // a fresh id can always be locked: it cannot fail once reserved
   out.stamp = verts[v].stamp.load(std::memory_order_relaxed);
   cone_from_vertex(ctx, v);
   grid_note(ctx, v);

@@ -115,6 +115,25 @@ TEST_CASE("fault: every allocation an insertion or a removal makes may fail, cha
   }
 }
 
+TEST_CASE("fault: an insertion whose new vertex needs a fresh chunk of ids may fail there, changing nothing",
+          "[fault]") {
+  // Vertex ids come in chunks (256 at a time): inserted one by one past a
+  // chunk's end, one insertion takes a fresh chunk, after its conflict zone is
+  // found and marked. A failure there must leave no cell marked (validate
+  // checks), else the next search takes a marked cell for its own zone's.
+  std::vector<Point3> pts = random_points(300, 11);
+  pdt::Triangulation t;
+  t.insert_batch(pts);
+  std::vector<Point3> known = pts;
+  std::set<std::string> sites;
+  for (const Point3& extra : random_points(600, 12)) {
+    known.push_back(extra);
+    fail_each_point(t, known, [&] { t.insert(extra); }, &sites);
+  }
+  REQUIRE(sites.count("vertex chunk") == 1);  // the case this test is for was reached
+  require_same_as_cgal(t, known);
+}
+
 TEST_CASE("fault: the centre of 510 cospherical points: a huge cavity and a large link fail cleanly", "[fault]") {
   // The centre conflicts with every cell (its cavity is the whole mesh, past
   // what a free list keeps: reserved spare segments), and its removal puts

@@ -143,6 +143,9 @@ struct alignas(64) Worker {
   // a block that keeps receiving work cannot starve the others.
   std::uint32_t home_cursor = 0;
   std::uint32_t repeat = 0;  // claims of the home_cursor block in a row
+  // Claims in a row of a home block whose first run was of a later BRIO
+  // round than this worker's last run, put back (body); 0 once one is taken.
+  std::uint32_t skipped = 0;
   std::uint32_t claims = 0;  // claims made (every 4th looks at orphaned blocks first)
   VertexId last_inserted = no_vertex;  // a batch insertion's walk starts here
   WalkWatch walks;  // this worker's recent walks (maybe_grow_grid)

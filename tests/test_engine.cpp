@@ -1007,7 +1007,13 @@ TEST_CASE("engine: one worker takes a batch's rounds block after block, as the s
   // at every break in the order instead (a round's stretch in a block can
   // come in pieces) walked 32 steps per insertion on 20k line points (73 at
   // 500k; the sequential batch: 6), each walk starting in the block left.
-  for (const pdt::Distribution dist : {pdt::Distribution::uniform, pdt::Distribution::line}) {
+  // A claim's first run was still taken whatever its round: a worker that
+  // came to a block without a run of its round took the next round's there
+  // while its other blocks still held runs of the round before (1.3-3% more
+  // cells made at 4k-20k points, line walks 1.11-1.15x). Since then a claim
+  // puts such a run back and moves on, until it has seen its home around.
+  for (const pdt::Distribution dist :
+       {pdt::Distribution::uniform, pdt::Distribution::normal, pdt::Distribution::line}) {
     const std::vector<Point3> pts = generated_points(dist, scaled(20000, 4000), 97);
     pdt::Triangulation seq;
     (void)seq.insert_batch(pts);
@@ -1024,8 +1030,8 @@ TEST_CASE("engine: one worker takes a batch's rounds block after block, as the s
     INFO(pdt::to_string(dist) << ": cells made by the engine's batch / by the sequential batch: "
                               << double(st.cells_created_by_insert) / double(st_seq.cells_created_by_insert)
                               << ", walk steps: " << double(st.walk_steps) / double(st_seq.walk_steps));
-    CHECK(double(st.cells_created_by_insert) <= 1.05 * double(st_seq.cells_created_by_insert));
-    CHECK(double(st.walk_steps) <= 1.5 * double(st_seq.walk_steps));
+    CHECK(double(st.cells_created_by_insert) <= 1.015 * double(st_seq.cells_created_by_insert));
+    CHECK(double(st.walk_steps) <= 1.2 * double(st_seq.walk_steps));
     require_same_as_cgal(t, pts);
   }
 }

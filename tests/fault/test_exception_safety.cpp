@@ -126,9 +126,13 @@ TEST_CASE("fault: an insertion whose new vertex needs a fresh chunk of ids may f
   t.insert_batch(pts);
   std::vector<Point3> known = pts;
   std::set<std::string> sites;
-  for (const Point3& extra : random_points(600, 12)) {
-    known.push_back(extra);
-    fail_each_point(t, known, [&] { t.insert(extra); }, &sites);
+  const std::vector<Point3> extras = random_points(240, 12);
+  for (std::size_t i = 0; i < extras.size(); ++i) {
+    known.push_back(extras[i]);
+    if (i < 200)  // 500 vertices: the second chunk's end (ids 257-512) is near
+      t.insert(extras[i]);
+    else
+      fail_each_point(t, known, [&] { t.insert(extras[i]); }, &sites);
   }
   REQUIRE(sites.count("vertex chunk") == 1);  // the case this test is for was reached
   require_same_as_cgal(t, known);

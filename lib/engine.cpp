@@ -463,7 +463,6 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   // its threads, which a hook may hold on a lock the caller has.
   shared->index = detail::spatial_order(points, true);
   shared->points = detail::make_raw_array<Point3>(points.size());  // first touched by the loop below
-  shared->point_count = points.size();
   const detail::RawArray<std::uint32_t> block_at =
       detail::make_raw_array<std::uint32_t>(points.size());  // the block of sorted point k
   detail::for_range(points.size(), true, [&, sorted = shared->points.get(), index = shared->index.data()](
@@ -474,7 +473,7 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
   });
   shared->fn = std::move(done);
   shared->remaining.store(points.size());
-  const std::size_t count = shared->point_count;
+  const std::size_t count = shared->point_count();
   const Point3* sorted = shared->points.get();
   std::vector<OpRecord*> runs;
   try {

@@ -150,7 +150,7 @@ WorkerCoroutine EngineState::body(Worker& w) {
         b->queued.fetch_sub(1, std::memory_order_relaxed);
         if (op->run_end) {
           const bool same_batch = reinterpret_cast<std::uintptr_t>(op->batch_done) == w.batch_taken;
-          const std::size_t n = op->batch_done->point_count;
+          const std::size_t n = op->batch_done->point_count();
           const unsigned round = brio_round(op->run_next, n);  // 0: the last round
           const unsigned last = same_batch ? brio_round(w.batch_taken_end - 1, n) : round;
           const std::uint32_t home = partition.home_first(w.index + 1) - partition.home_first(w.index);

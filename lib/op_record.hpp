@@ -22,11 +22,11 @@ struct TicketRange;  // tickets.hpp
 struct BatchCallback {
   Engine::Callback fn;
   std::atomic<std::uint64_t> remaining{0};
-  RawArray<Point3> points;             // insert_batch: in insertion order, point_count of them
-  std::size_t point_count = 0;
+  RawArray<Point3> points;             // insert_batch: in insertion order, point_count() of them
   std::vector<std::uint32_t> index;    // points[k] is the caller's points[index[k]]: ticket first_ticket + index[k]
   std::uint64_t first_ticket = 0;
   TicketRange* ticket_range = nullptr;  // insert_batch: the range of its tickets' slots (tickets.hpp)
+  std::size_t point_count() const { return index.size(); }  // insert_batch's; 0 for other batches
 };
 
 struct OpRecord {

@@ -4,8 +4,8 @@
 // the large arrays a batch fills in a parallel loop (its sorted points, its
 // order, its tickets' slots). std::vector's value-initialization zeroes them
 // on the allocating thread first, which also takes every page fault there
-// (1M points: 80 MB, about 20 ms on one thread before any parallel loop
-// starts); here each page is first touched by the thread that fills it.
+// (1M points: 80 MB, on one thread before any parallel loop starts); here
+// each page is first touched by the thread that fills it.
 // T is an implicit-lifetime type (an aggregate, or trivially constructible)
 // and trivially destructible, so the objects exist as soon as the storage
 // does; invariant: the owner writes an element before it reads it.

@@ -15,6 +15,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <string>
 #include <vector>
 
@@ -92,6 +93,12 @@ struct OpReader::State {
   std::uint64_t box_line = 0;          // text: where the box was
   std::optional<Operation> pending;    // text: the first operation, read while looking for a box
   bool done = false;
+  // What the first failing read threw (a malformed record, a read error, no
+  // memory). The file's position and the live set are then past a record
+  // that was not returned, so every later next() throws it again rather
+  // than read on from there. Invariant: set => no operation after it is
+  // ever returned.
+  std::exception_ptr failed;
   LiveSet live;
 
   // Text: the next operation, or false at the end of the file.
@@ -245,19 +252,28 @@ const std::string& OpReader::path() const { return state_of(state_).f.path(); }
 
 bool OpReader::next(Operation& op) {
   State& st = state_of(state_);
+  if (st.failed) std::rethrow_exception(st.failed);
   if (st.done) return false;
+  // Read into a local: a call that throws leaves the caller's op as it was.
+  Operation got_op;
   bool got = false;
   if (st.pending) {
-    op = *st.pending;
+    got_op = *st.pending;
     st.pending.reset();
     got = true;
   } else {
-    got = st.binary ? st.next_binary(op) : st.next_text(op);
+    try {
+      got = st.binary ? st.next_binary(got_op) : st.next_text(got_op);
+    } catch (...) {
+      st.failed = std::current_exception();
+      throw;
+    }
   }
   if (!got) {
     st.done = true;
     return false;
   }
+  op = got_op;
   ++st.read;
   return true;
 }

@@ -267,6 +267,51 @@ TEST_CASE("malformed binary streams are rejected", "[io]") {
   }
 }
 
+TEST_CASE("an OpReader whose next() threw stops there: the same error again, nothing past it, op untouched",
+          "[io]") {
+  TempDir d;
+  auto drain_after_error = [](pdt::OpReader& r, std::uint64_t good_before) {
+    pdt::Operation op;
+    for (std::uint64_t k = 0; k < good_before; ++k) REQUIRE(r.next(op));
+    const pdt::Operation marker = ins(-7, -8, -9);
+    std::string first_message;
+    for (int attempt = 0; attempt < 3; ++attempt) {
+      op = marker;
+      auto e = catch_error([&] { r.next(op); });
+      REQUIRE(e);  // never an operation from past the bad record, never a quiet end
+      CHECK(e->code() == pdt::ErrorCode::bad_format);
+      if (attempt == 0) first_message = e->what();
+      CHECK(std::string(e->what()) == first_message);
+      CHECK(same_bits(op.point, marker.point));  // the caller's op as it was
+      CHECK(r.operations_read() == good_before);
+    }
+  };
+  SECTION("binary: a record of an unknown kind, then a good insertion") {
+    pdt::OpStream s;
+    s.ops = {ins(1, 2, 3), ins(4, 5, 6), ins(7, 8, 9)};
+    const std::string good = d.file("good.opsb");
+    pdt::write_ops(good, s);
+    std::string b = pdt_test::read_file(good);
+    b[65 + 25] = 7;  // operation 1's kind
+    const std::string p = d.file("bad.opsb");
+    write_file(p, b);
+    pdt::OpReader r(p);
+    drain_after_error(r, 1);
+  }
+  SECTION("text: a bad line between good ones") {
+    const std::string p = d.file("bad.ops");
+    write_file(p, "i 1 2 3\ni 4 5 6\nx 1\ni 7 8 9\nr 0\n");
+    pdt::OpReader r(p);
+    drain_after_error(r, 2);
+  }
+  SECTION("text: an undo of an insertion not made yet") {
+    const std::string p = d.file("bad.ops");
+    write_file(p, "i 1 2 3\nr 5\ni 4 5 6\n");
+    pdt::OpReader r(p);
+    drain_after_error(r, 1);
+  }
+}
+
 TEST_CASE("missing or unreadable ops files give io_failure", "[io]") {
   TempDir d;
   auto e = catch_error([&] { pdt::read_ops(d.file("nope.ops")); });

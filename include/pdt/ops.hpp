@@ -40,8 +40,10 @@ struct OpStream {
 // that a long stream can be replayed without holding it in memory (what it
 // keeps grows with the live insertions, not with the stream). The format is
 // chosen by content; throws as read_ops does, from the constructor (a bad
-// header or box) or from next(). A moved-from reader refuses every call
-// (Error invalid_argument).
+// header or box) or from next(). A next() that throws leaves its argument
+// as it was and stops the reader there: every later next() throws the same
+// error again (the file is read no further). A moved-from reader refuses
+// every call (Error invalid_argument).
 class OpReader {
  public:
   explicit OpReader(const std::string& path);

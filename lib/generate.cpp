@@ -335,6 +335,10 @@ OpStream generate(const GenerateOptions& o) {
   if (o.points > kMaxPoints)
     throw Error(ErrorCode::invalid_argument,
                 "generate: " + std::to_string(o.points) + " points requested; at most " + std::to_string(kMaxPoints));
+  if (o.removal_order != RemovalOrder::after && o.removal_order != RemovalOrder::interleaved)
+    throw Error(ErrorCode::invalid_argument,
+                "generate: unknown removal order " + std::to_string(static_cast<int>(o.removal_order)) +
+                    "; expected RemovalOrder::after or RemovalOrder::interleaved");
   const std::uint64_t n = o.points;
   Rng point_rng(o.seed, 0);
   std::vector<Point3> pts;

@@ -261,6 +261,19 @@ TEST_CASE("generate rejects bad options; distribution names round-trip", "[gen]"
   auto e = catch_error([&] { pdt::generate(big); });
   REQUIRE(e);
   CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+  // Enumerators out of range (a cast, a bad file field): refused, as both say.
+  pdt::GenerateOptions bad_order;
+  bad_order.remove_fraction = 0.5;
+  bad_order.removal_order = static_cast<pdt::RemovalOrder>(7);
+  auto e3 = catch_error([&] { pdt::generate(bad_order); });
+  REQUIRE(e3);
+  CHECK(e3->code() == pdt::ErrorCode::invalid_argument);
+  CHECK(std::string(e3->what()).find("removal order") != std::string::npos);
+  pdt::GenerateOptions bad_dist;
+  bad_dist.dist = static_cast<pdt::Distribution>(99);
+  auto e4 = catch_error([&] { pdt::generate(bad_dist); });
+  REQUIRE(e4);
+  CHECK(e4->code() == pdt::ErrorCode::invalid_argument);
   for (auto d : kAll) CHECK(pdt::parse_distribution(pdt::to_string(d)) == d);
   auto e2 = catch_error([] { pdt::parse_distribution("gaussian"); });
   REQUIRE(e2);

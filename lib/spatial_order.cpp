@@ -391,10 +391,27 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
       items[i] = {hilbert_key({x[0], x[1], x[2]}), static_cast<std::uint32_t>(i)};
     }
   });
-  std::uint64_t state = 0x9e3779b97f4a7c15ull;
-  for (std::size_t i = n - 1; i > 0; --i) {
-    state = mix64(state + i);
-    std::swap(items[i], items[state % (i + 1)]);
+  // The swaps' partners do not depend on the items: each is drawn 16 swaps
+  // ahead and its item fetched meanwhile (the shuffle waits on memory). The
+  // same draws, the same order. (1M points, one thread, six alternating
+  // runs: spatial_order 50.5 -> 46.5 ms, medians.)
+  {
+    constexpr std::size_t ahead = 16;  // a power of two
+    std::uint64_t state = 0x9e3779b97f4a7c15ull;
+    std::size_t partner[ahead];
+    std::size_t drawn = n - 1;  // the next i to draw a partner for
+    auto draw = [&] {
+      state = mix64(state + drawn);
+      partner[drawn % ahead] = static_cast<std::size_t>(state % (drawn + 1));
+      __builtin_prefetch(&items[partner[drawn % ahead]], 1);
+      --drawn;
+    };
+    while (drawn > 0 && drawn + ahead > n - 1) draw();
+    for (std::size_t i = n - 1; i > 0; --i) {
+      const std::size_t j = partner[i % ahead];
+      if (drawn > 0) draw();
+      std::swap(items[i], items[j]);
+    }
   }
   // Each round sorted by (key, index) by a radix sort, on several threads
   // where the arena has them and the round is large. The same order either

@@ -242,85 +242,83 @@ struct Keyed {
   bool operator<(const Keyed& o) const { return key < o.key || (key == o.key && index < o.index); }
 };
 
-// The radix sorts' digits: 11 bits of a key a pass.
-constexpr int digit_bits = 11, passes = (3 * key_bits + digit_bits - 1) / digit_bits;
-constexpr std::size_t digits = std::size_t{1} << digit_bits;
-
-// The end of a radix sort whose last pass wrote `from`: the items back in a
-// (if they are not there), then each run of equal keys sorted by index.
-void finish_radix_sort(Keyed* a, std::size_t n, const Keyed* from) {
-  if (from != a) std::copy(from, from + n, a);
-  for (std::size_t i = 0; i + 1 < n;) {
-    std::size_t j = i + 1;
-    while (j < n && a[j].key == a[i].key) ++j;
-    if (j - i > 1) std::sort(a + i, a + j);
-    i = j;
+// Sorts a[0, n) by (key, index), as std::sort with Keyed's operator< would,
+// where the keys agree above bit `bits` (63 at the top): a radix sort from
+// the most significant digit (11 bits for large ranges, 8 below), each bucket
+// sorted on after it, so that after the first pass the work stays in cache
+// (1M uniform points: buckets of about 500 items). A digit that every key
+// shares is skipped without moving anything (clustered points share their
+// keys' top bits); up to 32 items are insertion sorted; keys equal in every
+// bit are sorted by index. scratch: room for n items.
+void msd_sort(Keyed* a, std::size_t n, Keyed* scratch, int bits) {
+  if (n <= 32) {
+    for (std::size_t i = 1; i < n; ++i)
+      for (std::size_t j = i; j > 0 && a[j] < a[j - 1]; --j) std::swap(a[j], a[j - 1]);
+    return;
   }
-  assert(std::is_sorted(a, a + n));
-}
-
-// Sorts a[0, n) by (key, index), as std::sort with Keyed's operator< would:
-// a least-significant-digit radix sort on the key (stable, 11 bits a pass,
-// a pass skipped when every key has the same digit there), then each run of
-// equal keys (copies of a point, or points closer than the key's
-// resolution: rare) by index. scratch: room for n items.
-void radix_sort(Keyed* a, std::size_t n, Keyed* scratch) {
-  if (n < 256) {
+  if (bits == 0) {  // every key equal
     std::sort(a, a + n);
     return;
   }
-  std::vector<std::uint32_t> count(passes * digits, 0);
-  for (std::size_t i = 0; i < n; ++i)
-    for (int p = 0; p < passes; ++p) ++count[p * digits + ((a[i].key >> (p * digit_bits)) & (digits - 1))];
-  Keyed* from = a;
-  Keyed* to = scratch;
-  for (int p = 0; p < passes; ++p) {
-    std::uint32_t* offset = count.data() + p * digits;
-    if (offset[(a[0].key >> (p * digit_bits)) & (digits - 1)] == n) continue;  // one digit: nothing moves
-    std::uint32_t sum = 0;
-    for (std::size_t d = 0; d < digits; ++d) sum += std::exchange(offset[d], sum);
-    for (std::size_t i = 0; i < n; ++i) to[offset[(from[i].key >> (p * digit_bits)) & (digits - 1)]++] = from[i];
-    std::swap(from, to);
-  }
-  finish_radix_sort(a, n, from);
+  const int width = std::min(bits, n > 65536 ? 11 : 8);
+  const int shift = bits - width;
+  const std::uint64_t mask = (std::uint64_t{1} << width) - 1;
+  // 2 KB of counts on the stack (8 levels deep at most); the wide digit's
+  // 16 KB, for large ranges only, on the heap.
+  std::uint32_t small[2 * 256 + 1];
+  std::vector<std::uint32_t> large(width > 8 ? 2 * (mask + 1) + 1 : 0);
+  std::uint32_t* count = width > 8 ? large.data() : small;
+  std::uint32_t* start = count + (mask + 1);
+  std::fill(count, count + (mask + 1), 0u);
+  for (std::size_t i = 0; i < n; ++i) ++count[a[i].key >> shift & mask];
+  if (count[a[0].key >> shift & mask] == n) return msd_sort(a, n, scratch, shift);  // one digit: nothing moves
+  start[0] = 0;
+  for (std::uint64_t d = 0; d <= mask; ++d) start[d + 1] = start[d] + count[d];
+  for (std::uint64_t d = 0; d <= mask; ++d) count[d] = start[d];
+  for (std::size_t i = 0; i < n; ++i) scratch[count[a[i].key >> shift & mask]++] = a[i];
+  std::copy(scratch, scratch + n, a);
+  for (std::uint64_t d = 0; d <= mask; ++d)
+    if (start[d + 1] - start[d] > 1) msd_sort(a + start[d], start[d + 1] - start[d], scratch, shift);
 }
 
-// radix_sort on several threads: the same passes, each counting and then
-// scattering `chunks` consecutive parts of the range in parallel. Stable as
-// the one-thread sort: part c's items with digit d go after those of parts
-// before c with that digit. The same result as radix_sort.
-void radix_sort_parallel(Keyed* a, std::size_t n, Keyed* scratch, unsigned chunks) {
+// msd_sort on several threads: the first pass counts and scatters `chunks`
+// consecutive parts of the range in parallel (part c's items with digit d
+// after those of the parts before c), then the buckets are sorted in
+// parallel. The same result: the one order by (key, index).
+void msd_sort_parallel(Keyed* a, std::size_t n, Keyed* scratch, unsigned chunks) {
+  constexpr int width = 11, shift = 3 * key_bits - width;
+  constexpr std::size_t digits = std::size_t{1} << width;
   std::vector<std::uint32_t> count(std::size_t{chunks} * digits);
   auto part = [&](unsigned c) { return n * c / chunks; };
-  Keyed* from = a;
-  Keyed* to = scratch;
-  for (int p = 0; p < passes; ++p) {
-    const int shift = p * digit_bits;
-    tbb::task_group_context counting(tbb::task_group_context::isolated);  // for_range.hpp says why
-    tbb::parallel_for(0u, chunks, [&](unsigned c) {
-      std::uint32_t* mine = count.data() + std::size_t{c} * digits;
-      std::fill(mine, mine + digits, 0u);
-      for (std::size_t i = part(c); i < part(c + 1); ++i) ++mine[(from[i].key >> shift) & (digits - 1)];
-    }, counting);
-    // Offsets, digit by digit, then part by part within a digit.
-    const std::size_t first_digit = (from[0].key >> shift) & (digits - 1);
-    std::size_t with_first = 0;
-    for (unsigned c = 0; c < chunks; ++c) with_first += count[c * digits + first_digit];
-    if (with_first == n) continue;  // one digit: nothing moves
-    std::uint32_t sum = 0;
-    for (std::size_t d = 0; d < digits; ++d)
-      for (unsigned c = 0; c < chunks; ++c) sum += std::exchange(count[c * digits + d], sum);
-    tbb::task_group_context scattering(tbb::task_group_context::isolated);
-    tbb::parallel_for(0u, chunks, [&](unsigned c) {
-      std::uint32_t* offset = count.data() + std::size_t{c} * digits;
-      for (std::size_t i = part(c); i < part(c + 1); ++i) to[offset[(from[i].key >> shift) & (digits - 1)]++] = from[i];
-    }, scattering);
-    std::swap(from, to);
+  tbb::task_group_context counting(tbb::task_group_context::isolated);  // for_range.hpp says why
+  tbb::parallel_for(0u, chunks, [&](unsigned c) {
+    std::uint32_t* mine = count.data() + std::size_t{c} * digits;
+    std::fill(mine, mine + digits, 0u);
+    for (std::size_t i = part(c); i < part(c + 1); ++i) ++mine[a[i].key >> shift];
+  }, counting);
+  // Offsets, digit by digit, then part by part within a digit.
+  std::vector<std::uint32_t> start(digits + 1);
+  std::uint32_t sum = 0;
+  for (std::size_t d = 0; d < digits; ++d) {
+    start[d] = sum;
+    for (unsigned c = 0; c < chunks; ++c) sum += std::exchange(count[c * digits + d], sum);
   }
-  finish_radix_sort(a, n, from);
+  start[digits] = sum;
+  tbb::task_group_context scattering(tbb::task_group_context::isolated);
+  tbb::parallel_for(0u, chunks, [&](unsigned c) {
+    std::uint32_t* offset = count.data() + std::size_t{c} * digits;
+    for (std::size_t i = part(c); i < part(c + 1); ++i) scratch[offset[a[i].key >> shift]++] = a[i];
+  }, scattering);
+  tbb::task_group_context sorting(tbb::task_group_context::isolated);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, digits, 16), [&](const tbb::blocked_range<std::size_t>& r) {
+    const std::size_t from = start[r.begin()], to = start[r.end()];
+    std::copy(scratch + from, scratch + to, a + from);
+    for (std::size_t d = r.begin(); d < r.end(); ++d)
+      if (start[d + 1] - start[d] > 1) msd_sort(a + start[d], start[d + 1] - start[d], scratch + start[d], shift);
+  }, sorting);
 }
 
-// Room for the radix sort, contiguous, mapped for the sort and unmapped after
+// Room for the sort, contiguous, mapped for the sort and unmapped after
 // it: freed to the heap, its 12 MB at 1M points stayed in the process beside
 // the mesh built next. (Not a StableArray: in the mimalloc build that one is
 // chunked, not contiguous.)
@@ -415,19 +413,20 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
   }
   // Each round sorted by (key, index) by a radix sort, on several threads
   // where the arena has them and the round is large. The same order either
-  // way. (1M uniform points, one thread: keys in vector lanes and radix_sort
-  // took the whole order from 0.17 to 0.085 s. In the engine's batch, on 2
-  // threads, TBB's parallel_sort took as much CPU time as the rest of the
-  // order.)
+  // way. (In the engine's batch, on 2 threads, TBB's parallel_sort took as
+  // much CPU time as the rest of the order. A least-significant-digit radix
+  // sort, 6 passes over the round, took 25 ms for 870k keys on one thread and
+  // 24 on two; msd_sort 13 and 8.)
   const unsigned threads = parallel ? static_cast<unsigned>(std::max(1, tbb::this_task_arena::max_concurrency())) : 1;
   const MappedScratch scratch(n - n / 4);
   for (std::size_t end = n; end > 0;) {
     const std::size_t begin = brio_round_begin(end);
     const unsigned chunks = static_cast<unsigned>(std::min<std::size_t>(threads, (end - begin) / 4096));
     if (chunks > 1)
-      radix_sort_parallel(items.get() + begin, end - begin, scratch.items, chunks);
+      msd_sort_parallel(items.get() + begin, end - begin, scratch.items, chunks);
     else
-      radix_sort(items.get() + begin, end - begin, scratch.items);
+      msd_sort(items.get() + begin, end - begin, scratch.items, 3 * key_bits);
+    assert(std::is_sorted(items.get() + begin, items.get() + end));
     end = begin;
   }
   // Keys too coarse for the points (a cluster far smaller than the box, or a

@@ -110,6 +110,9 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
         {"refine --domain sphere --size 0.5 --out m.node --trace m.ele", "--trace m.ele and --out m.node both write m.ele"},
         {"run m.node --out m.node", "--out m.node would overwrite the input m.node"},
         {"gen --points 1e17 --out x.ops", "--points '1e17': with a decimal point or an exponent at most 2^53"},
+        {"run a.ops --threads 4097", "--threads '4097': too large (at most 4096)"},
+        {"run a.ops --threads 99999999999999999999999", "--threads '99999999999999999999999': too large (at most 4096)"},
+        {"refine --domain sphere --size 0.5 --threads 1e30", "--threads '1e30': too large (at most 4096)"},
     };
     for (const auto& [args, why] : cases) {
       INFO(args);
@@ -130,6 +133,16 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
       const Result r = run_pdt(d, args);
       CHECK(r.code == 2);
       CHECK(r.err.find("--out " + nowhere + ": cannot write in") != std::string::npos);
+      CHECK(r.out.empty());  // nothing ran
+    }
+    // Under /dev and /proc too, where existing names are written in place.
+    for (const std::string& args : {"run '" + ops + "' --out /dev/pdt-no-such-dir/m.vtu",
+                                    "run '" + ops + "' --out /proc/pdt-no-such-dir/m.node",
+                                    std::string("gen --points 10 --out /dev/pdt-no-such-dir/x.ops")}) {
+      INFO(args);
+      const Result r = run_pdt(d, args);
+      CHECK(r.code == 2);
+      CHECK(r.err.find(": cannot write in '/") != std::string::npos);
       CHECK(r.out.empty());  // nothing ran
     }
     const Result r = run_pdt(d, "refine --domain sphere --size 0.5 --trace ''");

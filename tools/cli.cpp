@@ -79,8 +79,10 @@ void require_writable_file(const char* option, const std::string& path) {
     require_writable_dir(option, link);
     return;
   }
-  // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too (OutputFile).
-  if (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) return;
+  // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too
+  // (OutputFile), nothing made in their folder. One that is not there would
+  // be made there like any other file: its folder is checked.
+  if ((path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) && ::stat(path.c_str(), &st) == 0) return;
   require_writable_dir(option, path);
 }
 
@@ -155,14 +157,18 @@ bool Args::option(const char* name, bool takes_value) {
   return true;
 }
 
-std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v) {
+std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v, std::uint64_t max) {
+  auto too_large = [&] {
+    usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " + std::to_string(max) + ")");
+  };
   unsigned long long n = 0;
-  if (pdt::support::parse_count(v, n)) return n;
+  if (pdt::support::parse_count(v, n)) {
+    if (n > max) too_large();
+    return n;
+  }
   double d = 0;
   if (pdt::support::parse_real(v, d) && d >= 0 && d == std::floor(d)) {
-    if (d >= 0x1p64)
-      usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " +
-                                    std::to_string(std::numeric_limits<unsigned long long>::max()) + ")");
+    if (d >= 0x1p64) too_large();
     usage_error(args.usage(), std::string(name) + " '" + v +
                                   "': with a decimal point or an exponent at most 2^53 (9007199254740992); "
                                   "write larger counts in digits");

@@ -5,6 +5,7 @@
 // command's usage), number options, and the summary's rows.
 #include <cstdio>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -40,8 +41,10 @@ class Args {
   const char* usage_;
 };
 
-// A non-negative integer option value: "1000000", or "1e6" when integral.
-std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v);
+// A non-negative integer option value: "1000000", or "1e6" when integral, at
+// most `max` (a larger one, or one past 2^64, is refused naming `max`).
+std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v,
+                                 std::uint64_t max = std::numeric_limits<std::uint64_t>::max());
 double parse_real_option(const Args& args, const char* name, const std::string& v);
 
 // Refuses, before a long run, an output path whose directory is missing or

@@ -14,7 +14,9 @@
 //   pdt_fuzz [--seed S] [--cases N] [--seconds T] [--minimise-seconds M] [--out DIR] [--verbose]
 //
 // Defaults: seed 1, as many cases as fit in T = 60 seconds, minimising a
-// failure for at most M = 120 seconds. Exit status 0 if
+// failure for at most M = 120 seconds. The cases' seeds are S, S + 1, ...
+// (a run prints its range): runs meant to cover different cases need seeds
+// further apart than their case counts (a 600 s run makes a few thousand). Exit status 0 if
 // every case matched, 1 on a mismatch (the stream is in DIR), 2 on a
 // usage error.
 #include <oneapi/tbb/task_arena.h>

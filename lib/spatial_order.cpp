@@ -107,13 +107,14 @@ constexpr std::uint64_t hilbert_key(std::array<std::uint32_t, 3> x) {
 // from a table (12 loads a key where Skilling's transform does 20 levels of
 // work: 1M keys on one thread, four interleaved, 30 -> 12 ns each).
 //
-// The tables are derived at compile time from hilbert_key itself, so they
-// cannot drift from it: a prefix's state is named by the order in which the
-// curve visits the 8 subcubes after it (what hilbert_key gives each next
-// digit: on this curve the order fixes the orientation, 24 of them), and each
-// state's step is read off hilbert_key for a representative prefix. Checked
-// at compile time against hilbert_key on 512 pseudo-random points and the
-// lattice's corners, and in debug builds for every key a batch computes.
+// The tables are derived from hilbert_key itself, so they cannot drift from
+// it: a prefix's state is named by the order in which the curve visits the 8
+// subcubes after it (what hilbert_key gives each next digit: on this curve the
+// order fixes the orientation, 24 of them), and each state's step is read off
+// hilbert_key for a representative prefix. Built once per process (about
+// 1,700 calls of hilbert_key: well under a millisecond; at compile time it
+// exceeded Clang's constexpr step limit); checked against hilbert_key on 520
+// points in debug builds, and for every key a batch computes.
 // Encoding: entry = next state << 6 | key bits (3 in `first`, 6 in `pair`).
 struct HilbertMachine {
   static constexpr int max_states = 48;  // orientations of the cube (24 on this curve)
@@ -122,7 +123,7 @@ struct HilbertMachine {
   int states = 0;
 };
 
-constexpr HilbertMachine make_hilbert_machine() {
+HilbertMachine make_hilbert_machine() {
   constexpr int depth = key_bits;
   struct Prefix {
     int length = 0;
@@ -153,8 +154,10 @@ constexpr HilbertMachine make_hilbert_machine() {
     const auto sig = signature_of(p);
     for (int s = 0; s < m.states; ++s)
       if (signature[s] == sig) return s;
-    if (m.states == HilbertMachine::max_states || p.length > depth - 1)
-      throw "hilbert_key has more orientations than a cube";  // not a constant expression: fails the build
+    // A cube has 48 orientations, and a curve's states are reached within a
+    // few levels: neither bound is ever met.
+    assert(m.states < HilbertMachine::max_states && p.length < depth);
+    if (m.states == HilbertMachine::max_states) return 0;
     signature[m.states] = sig;
     representative[m.states] = p;
     return m.states++;
@@ -178,11 +181,9 @@ constexpr HilbertMachine make_hilbert_machine() {
   return m;
 }
 
-constexpr HilbertMachine hilbert_machine = make_hilbert_machine();
 static_assert(key_bits % 2 == 1, "the machine reads one level, then pairs");
-static_assert(hilbert_machine.states == 24, "the 3D Hilbert curve has 24 orientations");
 
-constexpr std::uint64_t machine_key(const HilbertMachine& m, const std::uint32_t x[3]) {
+std::uint64_t machine_key(const HilbertMachine& m, const std::uint32_t x[3]) {
   constexpr int top = 3 * (key_bits - 1);
   const std::uint64_t code = morton_code(x);
   unsigned e = m.first[code >> top & 7];
@@ -194,7 +195,7 @@ constexpr std::uint64_t machine_key(const HilbertMachine& m, const std::uint32_t
   return key;
 }
 
-constexpr bool machine_agrees() {
+[[maybe_unused]] bool machine_agrees(const HilbertMachine& m) {
   constexpr std::uint32_t all = (1u << key_bits) - 1;
   std::uint64_t state = 0x243f6a8885a308d3ull;
   for (int i = 0; i < 512 + 8; ++i) {
@@ -202,35 +203,40 @@ constexpr bool machine_agrees() {
     for (int a = 0; a < 3; ++a) {
       if (i < 8) {  // the corners
         x[a] = (i >> a & 1) ? all : 0;
-      } else {  // splitmix64
+      } else {
         state += 0x9e3779b97f4a7c15ull;
-        std::uint64_t z = state;
-        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-        z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-        x[a] = static_cast<std::uint32_t>((z ^ (z >> 31)) & all);
+        x[a] = static_cast<std::uint32_t>(mix64(state) & all);
       }
     }
-    if (machine_key(hilbert_machine, x) != hilbert_key({x[0], x[1], x[2]})) return false;
+    if (machine_key(m, x) != hilbert_key({x[0], x[1], x[2]})) return false;
   }
   return true;
 }
-static_assert(machine_agrees(), "the Hilbert machine differs from hilbert_key");
+
+const HilbertMachine& hilbert_machine() {
+  static const HilbertMachine m = [] {
+    HilbertMachine made = make_hilbert_machine();
+    assert(made.states == 24 && machine_agrees(made));  // the 3D Hilbert curve has 24 orientations
+    return made;
+  }();
+  return m;
+}
 
 // hilbert_key of four lattice points at once (x[k]: point k's axes), their
 // machines interleaved so that one's table load waits beside the others'.
-void hilbert_keys4(const std::uint32_t x[4][3], std::uint64_t out[4]) {
+void hilbert_keys4(const HilbertMachine& machine, const std::uint32_t x[4][3], std::uint64_t out[4]) {
   std::uint64_t code[4];
   unsigned state[4];
   constexpr int top = 3 * (key_bits - 1);
   for (int k = 0; k < 4; ++k) {
     code[k] = morton_code(x[k]);
-    const unsigned e = hilbert_machine.first[code[k] >> top & 7];
+    const unsigned e = machine.first[code[k] >> top & 7];
     out[k] = e & 7;
     state[k] = e >> 6;
   }
   for (int shift = top - 6; shift >= 0; shift -= 6)
     for (int k = 0; k < 4; ++k) {
-      const unsigned e = hilbert_machine.pair[state[k] * 64 + (code[k] >> shift & 63)];
+      const unsigned e = machine.pair[state[k] * 64 + (code[k] >> shift & 63)];
       out[k] = out[k] << 6 | (e & 63);
       state[k] = e >> 6;
     }
@@ -371,13 +377,14 @@ std::vector<std::uint32_t> spatial_order(std::span<const Point3> points, bool pa
     const double c[3] = {points[i].x, points[i].y, points[i].z};
     for (int a = 0; a < 3; ++a) x[a] = static_cast<std::uint32_t>(lattice.index(a, c[a]));
   };
+  const HilbertMachine& machine = hilbert_machine();
   for_range(n, parallel, [&](std::size_t begin, std::size_t end) {
     std::size_t i = begin;
     for (; i + 4 <= end; i += 4) {  // four at a time, their table walks interleaved
       std::uint32_t at[4][3];
       for (int k = 0; k < 4; ++k) lattice_point(i + k, at[k]);
       std::uint64_t keys[4];
-      hilbert_keys4(at, keys);
+      hilbert_keys4(machine, at, keys);
       for (int k = 0; k < 4; ++k) {
         assert(keys[k] == hilbert_key({at[k][0], at[k][1], at[k][2]}));
         items[i + k] = {keys[k], static_cast<std::uint32_t>(i + k)};

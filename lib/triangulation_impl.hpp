@@ -210,7 +210,7 @@ struct Triangulation::Impl {
   // batch 5%), so this read is the one access to a record outside the
   // locks, and ThreadSanitizer is told not to track it. Each slot is one
   // aligned 4-byte load, never torn; what it can see is argued at its use.
-  [[gnu::noinline, gnu::no_sanitize("thread")]] bool record_names(CellId c, VertexId v) const {
+  [[gnu::noinline]] __attribute__((no_sanitize("thread"))) bool record_names(CellId c, VertexId v) const {
     const volatile VertexId* slots = cells[c].v;
     for (int i = 0; i < 4; ++i)
       if (slots[i] == v) return true;

@@ -65,7 +65,8 @@ std::string dangling_link_target(const std::string& path) {
 
 void require_writable_file(const char* option, const std::string& path) {
   struct stat st;
-  if (::stat(path.c_str(), &st) == 0) {
+  const bool exists = ::stat(path.c_str(), &st) == 0;
+  if (exists) {
     if (S_ISDIR(st.st_mode))
       throw pdt::Error(pdt::ErrorCode::io_failure,
                        std::string(option) + ": cannot write '" + path + "': it is a directory");
@@ -82,7 +83,7 @@ void require_writable_file(const char* option, const std::string& path) {
   // /dev/stdout, /dev/fd/N, /proc/self/fd/N: written in place too
   // (OutputFile), nothing made in their folder. One that is not there would
   // be made there like any other file: its folder is checked.
-  if ((path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0) && ::stat(path.c_str(), &st) == 0) return;
+  if (exists && (path.rfind("/dev/", 0) == 0 || path.rfind("/proc/", 0) == 0)) return;
   require_writable_dir(option, path);
 }
 

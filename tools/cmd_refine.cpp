@@ -100,7 +100,7 @@ int cmd_refine(Args args) {
     } else if (args.option("--ratio", true)) {
       ratio = parse_real_option(args, "--ratio", args.value());
     } else if (args.option("--threads", true)) {
-      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), 4096);
+      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), pdt::EngineOptions::max_workers);
       workers = n == 0 ? std::max(1u, std::thread::hardware_concurrency()) : static_cast<unsigned>(n);
     } else if (args.option("--seed", true)) {
       seed = parse_count_option(args, "--seed", args.value());

@@ -373,7 +373,7 @@ int cmd_run(Args args) {
       return 0;
     }
     if (args.option("--threads", true)) {
-      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), 4096);
+      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), pdt::EngineOptions::max_workers);
       workers = n == 0 ? std::max(1u, std::thread::hardware_concurrency()) : static_cast<unsigned>(n);
     } else if (args.option("--in-flight", true)) {
       in_flight = parse_count_option(args, "--in-flight", args.value());

@@ -522,7 +522,10 @@ bool check_errors(const char* what, const Result& r) {
 // Tables 2-4: one distribution. Returns the number of mismatches.
 int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
   const std::string name = pdt::to_string(dist);
-  const auto [pts, box] = generated_points(dist, o.points, o.seed);
+  // Named, not bound: a lambda cannot capture a structured binding before Clang 16.
+  const PointSet generated = generated_points(dist, o.points, o.seed);
+  const std::vector<pdt::Point3>& pts = generated.points;
+  const pdt::Box& box = generated.box;
   const std::size_t n_remove = static_cast<std::size_t>(o.remove_fraction * double(pts.size()));
   const std::vector<char> cgal_removes = last_removals(pts, n_remove);
 
@@ -634,7 +637,9 @@ int main_table(const Options& o, pdt::Distribution dist, Csv& csv) {
 
 // Table 1 (§3.3): 3,000 normal points, insert all then remove all.
 int extreme_table(const Options& o, Csv& csv) {
-  const auto [pts, box] = generated_points(pdt::Distribution::normal, extreme_points, o.seed);
+  const PointSet generated = generated_points(pdt::Distribution::normal, extreme_points, o.seed);
+  const std::vector<pdt::Point3>& pts = generated.points;
+  const pdt::Box& box = generated.box;
   const unsigned tmax = *std::max_element(o.threads.begin(), o.threads.end());
   std::vector<unsigned> ts{1};
   if (tmax > 1) ts.push_back(tmax);

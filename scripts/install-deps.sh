@@ -8,10 +8,11 @@
 #                              own reader)
 #   install-deps.sh --extras   also what the plot and picture scripts need
 #                              (matplotlib, Xvfb for VTK's offscreen rendering)
+#                              and the clang preset (clang++)
 set -euo pipefail
 packages=(build-essential cmake ninja-build pkg-config libtbb-dev libcgal-dev libgmp-dev libmpfr-dev
           libboost-dev libmimalloc-dev catch2 zlib1g-dev python3-vtk9 python3-numpy)
-if [ "${1:-}" = "--extras" ]; then packages+=(python3-matplotlib xvfb xauth); fi
+if [ "${1:-}" = "--extras" ]; then packages+=(python3-matplotlib xvfb xauth clang); fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -1824,7 +1824,9 @@ TEST_CASE("engine: storage follows the live mesh when workers free what others a
     e.remove_insertions(tickets);
     e.drain();
   };
-  for (const auto& [workers, in_turn] : {std::pair{2u, false}, {4u, false}, {2u, true}, {4u, true}}) {
+  for (const auto& config : {std::pair{2u, false}, {4u, false}, {2u, true}, {4u, true}}) {
+    const unsigned workers = config.first;  // not a structured binding: lambdas capture it (Clang 14)
+    const bool in_turn = config.second;
     INFO(workers << " workers, " << (in_turn ? "engines in turn" : "one engine"));
     pdt::Triangulation t;
     tbb::task_arena arena(2);

@@ -54,6 +54,10 @@
 //    waits for itself (drain() waits for the callback) and hangs. Callbacks
 //    must not wait for the engine; co_await instead. drain() and the
 //    destructor called from the engine's own work are detected and refused.
+//    Parallel work a callback starts and waits for (a tbb::parallel_for,
+//    a task_group) counts as the callback: drain() in it is refused where it
+//    runs on the callback's own thread, and hangs where another thread runs
+//    it, since the callback then waits for that drain().
 #include <coroutine>
 #include <cstdint>
 #include <exception>
@@ -169,7 +173,11 @@ class Engine {
   // has outside it stay, and may be removed through the engine (their
   // operations go to the nearest block). arena: where workers
   // run (it must outlive the engine, as t must); null = the caller's current
-  // arena, attached. Throws pdt::Error(invalid_argument)
+  // arena, attached. An arena whose slots are all reserved for application
+  // threads (task_arena(n, n) with n >= 2) gets no oneTBB worker thread: the
+  // engine's work there runs only while an application thread is inside it
+  // (in drain(), or in arena.execute), so callbacks and co_await wait until
+  // then. Throws pdt::Error(invalid_argument)
   // for a bad domain or option, or when another engine is attached to t.
   Engine(Triangulation& t, const Box& domain, EngineOptions options = EngineOptions::from_environment(),
          tbb::task_arena* arena = nullptr);

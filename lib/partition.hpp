@@ -70,6 +70,15 @@ class Partition {
     return lo;
   }
   std::uint32_t block_of(const Point3& p) const { return block_of_key(key_of(p)); }
+  // The same, trying `near` (a block) first: points along a curve mostly stay
+  // in the block of the one before them, and then no search is made.
+  std::uint32_t block_of(const Point3& p, std::uint32_t near) const {
+    const std::uint64_t key = key_of(p);
+    if (near < count_ && split_[near].load(std::memory_order_relaxed) <= key &&
+        key < split_[near + 1].load(std::memory_order_relaxed))
+      return near;
+    return block_of_key(key);
+  }
 
   // Re-cuts the curve so that each block gets an equal share of `sorted_keys`
   // (a sample of where the work is, in increasing order; not empty).

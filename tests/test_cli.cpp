@@ -296,7 +296,7 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK_FALSE(std::filesystem::exists(d.file("k.vtu")));
 #endif
   }
-  SECTION("a summary that cannot be written, a failed mesh write, a link to the trace: nothing put in place") {
+  SECTION("a summary that cannot be written, a failed mesh write, a link to the trace leave nothing in place") {
 #ifdef PDT_TOOL_PATH
     const std::string tool = std::string("'") + PDT_TOOL_PATH + "' ";
     auto status_of = [](const std::string& cmd) {
@@ -340,6 +340,17 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     r = run_pdt(d, "refine --domain sphere --size 0.3 --out '" + d.file("c.vtu") + "' --trace '" + d.file("t.ops") + "'");
     CHECK(r.code == 2);
     CHECK(r.err.find("give the trace a name of its own") != std::string::npos);
+    // One file under two names, neither there yet, one of them bare (run in
+    // d): refused before the run, nothing written.
+    for (const char* names : {"--out b.vtu --trace ./b.vtu", "--out ./b.vtu --trace b.vtu",
+                              "--out b.node --trace ./b.ele"}) {
+      INFO(names);
+      CHECK(status_of("cd '" + d.path().string() + "' && " + tool + "refine --domain sphere --size 0.3 " + names +
+                      " >/dev/null 2>'" + err + "'") == 2);
+      CHECK(pdt_test::read_file(err).find("give the trace a name of its own") != std::string::npos);
+      CHECK_FALSE(std::filesystem::exists(d.file("b.vtu")));
+      CHECK_FALSE(std::filesystem::exists(d.file("b.ele")));
+    }
     // Standard error closed, read by name: refused too (its place is held by
     // a descriptor that can be neither read nor written).
     CHECK(status_of(tool + "run /dev/stderr 2>&- >/dev/null") == 2);

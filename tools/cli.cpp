@@ -130,8 +130,12 @@ bool same_file(const std::string& a, const std::string& b) {
   const std::string la = dangling_link_target(a), lb = dangling_link_target(b);
   const std::string& wa = la.empty() ? a : la;
   const std::string& wb = lb.empty() ? b : lb;
+  // Made absolute first: weakly_canonical leaves a bare name ("m.vtu", no
+  // part of it there yet) relative, and "./m.vtu" absolute.
   std::error_code ea, eb;
-  const std::filesystem::path pa = std::filesystem::weakly_canonical(wa, ea), pb = std::filesystem::weakly_canonical(wb, eb);
+  std::filesystem::path pa = std::filesystem::absolute(wa, ea), pb = std::filesystem::absolute(wb, eb);
+  if (!ea) pa = std::filesystem::weakly_canonical(pa, ea);
+  if (!eb) pb = std::filesystem::weakly_canonical(pb, eb);
   return ea || eb ? wa == wb : pa == pb;
 }
 

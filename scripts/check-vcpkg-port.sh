@@ -143,9 +143,27 @@ done <<< "$LINT_OUT"
 
 # --- 2. vcpkg ----------------------------------------------------------------------------------
 say "2. vcpkg"
-for t in git cmake ninja c++ python3 pkg-config patchelf; do
-  command -v "$t" >/dev/null || abort "missing tool: $t (Debian: apt-get install git cmake ninja-build g++ python3 pkg-config patchelf)"
-done
+# Every missing prerequisite named at once, each with its Debian package, rather than
+# one per run.
+missing=() packages=()
+need() {  # need WHAT PACKAGE TEST...
+  local what=$1 package=$2; shift 2
+  "$@" >/dev/null 2>&1 || { missing+=("$what"); packages+=("$package"); }
+}
+abort_if_missing() {
+  [ ${#missing[@]} -eq 0 ] && return
+  local list
+  list=$(IFS=,; echo "${missing[*]}")
+  abort "missing: ${list//,/, } (Debian: apt-get install ${packages[*]})"
+}
+need git git command -v git
+need cmake cmake command -v cmake
+need ninja ninja-build command -v ninja
+need c++ g++ command -v c++
+need python3 python3 command -v python3
+need pkg-config pkg-config command -v pkg-config
+need patchelf patchelf command -v patchelf
+abort_if_missing
 if [ -n "${VCPKG_ROOT:-}" ]; then
   VCPKG_ROOT=$(cd "$VCPKG_ROOT" 2>/dev/null && pwd) || abort "VCPKG_ROOT=$VCPKG_ROOT: no such directory"
   [ -f "$VCPKG_ROOT/.vcpkg-root" ] && [ -x "$VCPKG_ROOT/vcpkg" ] \
@@ -162,9 +180,10 @@ else
     ok "vcpkg built before from $TARBALL ($OFFLINE)"
   else
     # RECIPE.sh apt-installs what it misses; say what is missing instead of becoming root here.
-    pkg-config --exists libcurl \
-      || abort "vcpkg needs libcurl's headers to build: apt-get install libcurl4-openssl-dev"
-    for t in zip unzip g++; do command -v "$t" >/dev/null || abort "missing tool: $t (apt-get install $t)"; done
+    need "libcurl's headers" libcurl4-openssl-dev pkg-config --exists libcurl
+    need zip zip command -v zip
+    need unzip unzip command -v unzip
+    abort_if_missing
     say "building vcpkg from $TARBALL (3-8 min; log $CACHE/vcpkg-build.log)"
     t=$(date +%s)
     rm -rf "$OFFLINE"; mkdir -p "$CACHE"

@@ -469,7 +469,7 @@ Engine::Ticket Engine::insert_batch(std::span<const Point3> points, Callback don
                                                std::size_t begin, std::size_t end) {
     // Two loops: the gather alone keeps many of its cache misses in flight.
     for (std::size_t k = begin; k < end; ++k) sorted[k] = points[index[k]];
-    std::uint32_t block = e.partition.block_of(sorted[begin]);
+    std::uint32_t block = e.partition.blocks();  // no block yet: the piece's first point is searched for
     for (std::size_t k = begin; k < end; ++k) block_at[k] = block = e.partition.block_of(sorted[k], block);
   });
   shared->fn = std::move(done);

@@ -70,8 +70,9 @@ class Partition {
     return lo;
   }
   std::uint32_t block_of(const Point3& p) const { return block_of_key(key_of(p)); }
-  // The same, trying `near` (a block) first: points along a curve mostly stay
-  // in the block of the one before them, and then no search is made.
+  // The same, trying `near` (a block, or blocks() for none) first: points
+  // along a curve mostly stay in the block of the one before them, and then
+  // no search is made.
   std::uint32_t block_of(const Point3& p, std::uint32_t near) const {
     const std::uint64_t key = key_of(p);
     if (near < count_ && split_[near].load(std::memory_order_relaxed) <= key &&

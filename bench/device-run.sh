@@ -2,14 +2,14 @@
 # SPDX-License-Identifier: MIT
 # Runs bench/scaling.sh with the binaries and libraries bench/device-pack.sh packed, on a
 # machine that has neither our build nor our dependencies (the lent 16-core one).
-# Usage: bench/device-run.sh OUTDIR [SECONDS]    (DEV: the packed folder, default .dev)
+# Usage: bench/device-run.sh OUTDIR [SECONDS [STEP...]]    (DEV: the packed folder, default .dev)
 # The tables are written in a scratch folder (WORK, default a new one under /tmp) and
 # packed into OUTDIR/scaling-results.tar.gz at the end, the refiner trace left out: one
-# file, as the lent machine's $OUT takes few. SECONDS is scaling.sh's deadline: give the
-# call a minute more.
+# file, as the lent machine's $OUT takes few. SECONDS and the STEPs are scaling.sh's (its
+# deadline, and which tables in which order): give the call a minute more than SECONDS.
 set -euo pipefail
 if [ $# -lt 1 ]; then
-  echo "usage: $0 OUTDIR [SECONDS]" >&2
+  echo "usage: $0 OUTDIR [SECONDS [STEP...]]" >&2
   exit 2
 fi
 here=$(cd "$(dirname "$0")" && pwd)
@@ -41,6 +41,7 @@ out=$1
 shift
 mkdir -p "$out"
 work=${WORK:-$(mktemp -d /tmp/pdt-scaling.XXXXXX)}
+mkdir -p "$work"
 status=0
 bash "$here/scaling.sh" "$work" "$@" || status=$?
 tar -C "$work" -czf "$out/scaling-results.tar.gz" --exclude='*.ops' .

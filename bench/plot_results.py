@@ -80,7 +80,12 @@ def save(fig, axes, used, title, out):
 
 
 def plot_main(rows, out, machine):
-    dists = sorted({r["dist"] for r in rows if r["experiment"] == "main"}, key=["uniform", "normal", "line"].index)
+    known = ["uniform", "normal", "line", "clusters", "kuzmin"]  # the benches' order; others after, as read
+    dists = []
+    for r in rows:
+        if r["experiment"] == "main" and r["dist"] not in dists:
+            dists.append(r["dist"])
+    dists.sort(key=lambda d: known.index(d) if d in known else len(known))
     fig, axes = panel_axes(len(dists))
     for ax, d in zip(axes, dists):
         threads = []

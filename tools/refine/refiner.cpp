@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <coroutine>
@@ -136,7 +137,7 @@ struct Detached {
 
 class Refiner {
  public:
-  // lanes: how many slabs of the domain hold their own queue of bad cells
+  // lanes: how many boxes of the domain hold their own queue of bad cells
   // (Lane, below).
   Refiner(const RefineOptions& o, pdt::Engine& e, Trace& trace, unsigned lanes, std::vector<Point3> samples)
       : o_(o),
@@ -147,11 +148,29 @@ class Refiner {
         protect_(protect_radius(o.size)),
         lanes_(std::max(1u, lanes)) {
     const pdt::Box& bx = o.domain.box;
-    const double lo[3] = {bx.lo.x, bx.lo.y, bx.lo.z}, ex[3] = {bx.hi.x - bx.lo.x, bx.hi.y - bx.lo.y, bx.hi.z - bx.lo.z};
-    axis_ = ex[1] > ex[0] ? 1 : 0;
-    if (ex[2] > ex[axis_]) axis_ = 2;
-    slab_lo_ = lo[axis_];
-    slab_extent_ = ex[axis_] > 0 ? ex[axis_] : 1;
+    lo_ = {bx.lo.x, bx.lo.y, bx.lo.z};
+    extent_ = {bx.hi.x - bx.lo.x, bx.hi.y - bx.lo.y, bx.hi.z - bx.lo.z};
+    // Each prime factor of the lane count, largest first, cuts the axis whose
+    // boxes are longest: the boxes come out about as wide as they are long.
+    unsigned rest = static_cast<unsigned>(lanes_.size());
+    std::vector<unsigned> factors;
+    for (unsigned f = 2; rest > 1;) {
+      if (rest % f == 0) {
+        factors.push_back(f);
+        rest /= f;
+      } else {
+        ++f;
+      }
+    }
+    for (auto f = factors.rbegin(); f != factors.rend(); ++f) {
+      int a = 0;
+      for (int i = 1; i < 3; ++i)
+        if (extent_[i] / cuts_[i] > extent_[a] / cuts_[a]) a = i;
+      cuts_[a] *= *f;
+    }
+    for (double& e : extent_)
+      if (!(e > 0)) e = 1;
+    assert(static_cast<std::size_t>(cuts_[0]) * cuts_[1] * cuts_[2] == lanes_.size());
   }
 
   // Inside every operation that makes or deletes a vertex, on its worker.
@@ -198,11 +217,13 @@ class Refiner {
       });
   }
 
-  // A refiner coroutine: cells from its home lane, then from the others,
-  // until all are empty.
-  Detached work(std::size_t home) {
+  // A refiner coroutine: cells from the lane it holds (Lane, below) until
+  // every lane is empty.
+  Detached work() {
     Bad b;
-    while (!stop_.load(std::memory_order_relaxed) && pop(home, b)) {
+    Taker taker;
+    while (!stop_.load(std::memory_order_relaxed) && pop(taker, b)) {
+      const std::size_t home = taker.lane;
       if (cells_.get(b.cell.id) != b.cell.incarnation) {
         lanes_[home].dead.fetch_add(1, std::memory_order_relaxed);
         continue;
@@ -239,6 +260,7 @@ class Refiner {
         if (!r.inserted) undo_duplicate(r.vertex, b.circumcentre);
       }
     }
+    if (taker.holds) lanes_[taker.lane].held.store(false, std::memory_order_release);  // stopped with cells left
   }
 
   // co_await insert_once(p): inserts p; if it was there already (two cells
@@ -358,24 +380,69 @@ class Refiner {
     to.pushed.fetch_add(1, std::memory_order_relaxed);
     to.queue.push(b);
   }
-  // The lane of the slab holding p (slabs of equal width across the
-  // domain's box along its longest axis; a point off the box goes to the
-  // nearest end slab).
+  // The lane of the box holding p (cuts_ boxes of equal size along each
+  // axis of the domain's box; a point off the box goes to the nearest box).
   std::size_t lane_of(const Point3& p) const {
-    const double at = axis_ == 0 ? p.x : axis_ == 1 ? p.y : p.z;
-    const double k = std::floor((at - slab_lo_) / slab_extent_ * static_cast<double>(lanes_.size()));
-    if (!(k > 0)) return 0;  // NaN included
-    return std::min(static_cast<std::size_t>(std::min(k, 1e9)), lanes_.size() - 1);
+    const double at[3] = {p.x, p.y, p.z};
+    std::size_t lane = 0;
+    for (int i = 2; i >= 0; --i) {
+      const double k = std::floor((at[i] - lo_[i]) / extent_[i] * cuts_[i]);
+      const unsigned c = !(k > 0) ? 0 : static_cast<unsigned>(std::min(k, static_cast<double>(cuts_[i] - 1)));  // NaN: 0
+      lane = lane * cuts_[i] + c;
+    }
+    return lane;
   }
-  // Its own lane first, then the others'.
-  bool pop(std::size_t home, Bad& b) {
-    const std::size_t n = lanes_.size();
-    for (std::size_t k = 0; k < n; ++k)
-      if (lanes_[(home + k) % n].queue.try_pop(b)) {
-        lanes_[(home + k) % n].popped.fetch_add(1, std::memory_order_relaxed);
-        return true;
+  // Which lane a coroutine takes cells from, and whether it holds it.
+  struct Taker {
+    std::size_t lane = 0;
+    bool holds = false;
+  };
+  // The next cell for a coroutine: from its lane while that has cells; then
+  // from the fullest lane nobody holds, which it holds from then on; if every
+  // lane with cells is held, from the fullest of those, held by another.
+  bool pop(Taker& t, Bad& b) {
+    if ((t.holds || lanes_.size() == 1) && take(t.lane, b)) return true;
+    if (t.holds) lanes_[t.lane].held.store(false, std::memory_order_release), t.holds = false;
+    for (;;) {
+      std::size_t best = lanes_.size(), shared = lanes_.size();
+      std::int64_t most = 0, most_shared = 0;
+      for (std::size_t i = 0; i < lanes_.size(); ++i) {
+        const Lane& l = lanes_[i];
+        const std::int64_t n = static_cast<std::int64_t>(l.pushed.load(std::memory_order_relaxed)) -
+                               static_cast<std::int64_t>(l.popped.load(std::memory_order_relaxed));
+        if (n <= 0) continue;
+        if (!l.held.load(std::memory_order_relaxed)) {
+          if (n > most) most = n, best = i;
+        } else if (n > most_shared) {
+          most_shared = n, shared = i;
+        }
       }
-    return false;
+      if (best < lanes_.size()) {
+        if (lanes_[best].held.exchange(true, std::memory_order_acq_rel)) continue;  // another came first
+        t = {best, true};
+        if (take(best, b)) return true;
+        lanes_[best].held.store(false, std::memory_order_release), t.holds = false;
+        continue;  // emptied since it was counted
+      }
+      if (shared < lanes_.size()) {
+        t = {shared, false};
+        if (take(shared, b)) return true;
+        continue;
+      }
+      // Nothing counted: what a count has not shown yet (pushed after it was
+      // read) is taken in the next round (refine() runs rounds until empty).
+      for (std::size_t i = 0; i < lanes_.size(); ++i)
+        if (take(i, b)) {
+          t = {i, false};
+          return true;
+        }
+      return false;
+    }
+  }
+  bool take(std::size_t lane, Bad& b) {
+    if (!lanes_[lane].queue.try_pop(b)) return false;
+    lanes_[lane].popped.fetch_add(1, std::memory_order_relaxed);
+    return true;
   }
   const RefineOptions& o_;
   pdt::Engine& e_;
@@ -383,31 +450,45 @@ class Refiner {
   Samples samples_;
   double snap_, protect_;
   CellTable cells_;
-  // The bad cells, in lanes: the domain's box cut into slabs along its
-  // longest axis, a FIFO queue per slab; the hook queues a bad cell in the
-  // lane of its circumcentre, and each refiner coroutine has a home lane,
-  // which it takes from first. So concurrent coroutines refine apart from
+  // The bad cells, in lanes: the domain's box cut into boxes (cuts_ along
+  // each axis), a FIFO queue per box; the hook queues a bad cell in the
+  // lane of its circumcentre. A refiner coroutine holds one lane at a time
+  // and takes its cells until it is empty, then holds the fullest lane that
+  // nobody holds (pop); there are 8 lanes a coroutine, so that a lane is
+  // free to take as a rule (a domain leaves many of its box's lanes empty).
+  // So concurrent coroutines refine apart from
   // each other: neighbouring bad cells (queued together by one insertion)
   // taken by several coroutines at once make insertions that collide (a
   // lock held by another worker: a rollback) or find their cell destroyed by
   // a neighbour's insertion (dead), and the engine's workers serve different
   // blocks. Within a lane the FIFO keeps the order cells were made in, and
   // with it the locality the kernel's caches need. With one thread there is
-  // one lane: nothing runs concurrently, and slabs would only cost locality.
+  // one lane: nothing runs concurrently, and boxes would only cost locality.
   // (Lanes were first one per arena thread, a cell queued on the thread that
   // made it; on the torus at size 0.025 with 2 workers they gave 1.36 s
   // against 1.20 s for a lane per coroutine, alternating runs; a random pick
-  // from the lane: 3.1 s, all locality lost.) Counters are per lane, written
-  // by whichever thread pushes or pops there.
+  // from the lane: 3.1 s, all locality lost. Slabs along the box's longest
+  // axis, one per coroutine, each coroutine taking from its own first, then
+  // from the next: on the torus, whose box the ring leaves empty at both
+  // ends, 30% of the cells were taken from a neighbour's lane, beside its
+  // coroutine: 0.74 rollbacks an insertion at 16 workers on 16 cores. On
+  // the torus at size 0.018 with 2 workers on 2 cores, held lanes took the
+  // rollbacks from 49-52k to 5.0-5.5k, the time from 2.15-3.21 s to
+  // 1.89 s, and the peak from 256 to 227 MiB, alternating runs.)
+  // Counters are per lane, written by whichever thread pushes or pops there.
   struct alignas(64) Lane {
     tbb::concurrent_queue<Bad> queue;
+    std::atomic<bool> held{false};  // a coroutine takes its cells (pop)
     // dead: found dead when taken; died_queued: alive when submitted, dead
     // when its insertion ran (insert_if_alive did nothing)
     std::atomic<std::uint64_t> pushed{0}, popped{0}, dead{0}, died_queued{0};
   };
   std::vector<Lane> lanes_;
-  int axis_ = 0;                            // the box's longest axis: slabs across it
-  double slab_lo_ = 0, slab_extent_ = 1;    // the box along that axis
+  // The domain's box (its lower corner and extents, an extent of 0 taken as
+  // 1) and how many lanes' boxes it is cut into along each axis; the product
+  // of the cuts is the number of lanes.
+  std::array<double, 3> lo_{}, extent_{};
+  std::array<unsigned, 3> cuts_{1, 1, 1};
   std::array<Point3, 8> corners_{};
   std::atomic<int> corner_now_{-1};  // the corner being inserted, while start() runs
   std::atomic<bool> stop_{false}, budget_hit_{false}, samples_over_budget_{false};
@@ -496,7 +577,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
     // operations still running may queue more cells), until nothing is left.
     // A lane per coroutine when threads run concurrently (Refiner::Lane).
     const unsigned coroutines = 4 * o.workers;
-    const unsigned lanes = threads > 1 ? coroutines : 1;
+    const unsigned lanes = threads > 1 ? 8 * coroutines : 1;
     Refiner r(o, e, trace, lanes, std::move(samples));
     e.set_change_hook([&r](const pdt::Changes& c) { r.on_change(c); }, true);
     r.start();
@@ -510,7 +591,7 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
         continue;
       }
       arena.execute([&] {
-        for (unsigned k = 0; k < coroutines; ++k) r.work(k % lanes);
+        for (unsigned k = 0; k < coroutines; ++k) r.work();
       });
       // drain() blocks: report progress from here meanwhile.
       std::atomic<bool> drained{false};

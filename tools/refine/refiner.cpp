@@ -396,12 +396,20 @@ class Refiner {
   struct Taker {
     std::size_t lane = 0;
     bool holds = false;
+    unsigned shared_left = 0;  // not holding it: cells to take from `lane` before looking again
   };
   // The next cell for a coroutine: from its lane while that has cells; then
   // from the fullest lane nobody holds, which it holds from then on; if every
-  // lane with cells is held, from the fullest of those, held by another.
+  // lane with cells is held, from the fullest of those, held by another, for
+  // up to shared_take cells before it looks again (a look reads every lane).
+  static constexpr unsigned shared_take = 32;
   bool pop(Taker& t, Bad& b) {
     if ((t.holds || lanes_.size() == 1) && take(t.lane, b)) return true;
+    if (t.shared_left > 0) {
+      --t.shared_left;
+      if (take(t.lane, b)) return true;
+      t.shared_left = 0;
+    }
     if (t.holds) lanes_[t.lane].held.store(false, std::memory_order_release), t.holds = false;
     for (;;) {
       std::size_t best = lanes_.size(), shared = lanes_.size();
@@ -419,13 +427,13 @@ class Refiner {
       }
       if (best < lanes_.size()) {
         if (lanes_[best].held.exchange(true, std::memory_order_acq_rel)) continue;  // another came first
-        t = {best, true};
+        t = {best, true, 0};
         if (take(best, b)) return true;
         lanes_[best].held.store(false, std::memory_order_release), t.holds = false;
         continue;  // emptied since it was counted
       }
       if (shared < lanes_.size()) {
-        t = {shared, false};
+        t = {shared, false, shared_take - 1};
         if (take(shared, b)) return true;
         continue;
       }
@@ -433,7 +441,7 @@ class Refiner {
       // read) is taken in the next round (refine() runs rounds until empty).
       for (std::size_t i = 0; i < lanes_.size(); ++i)
         if (take(i, b)) {
-          t = {i, false};
+          t = {i, false, 0};
           return true;
         }
       return false;

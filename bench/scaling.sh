@@ -2,8 +2,8 @@
 # SPDX-License-Identifier: MIT
 # The 16-core tables of the README (issue 13), each written by bench/record.sh into OUTDIR
 # as it finishes. Steps, in the default order:
-#   refine       the refiner against CGAL, 1 to 16 workers (torus, size 0.018: 1.7x the
-#                cells of the 2-core table's 0.025, so that 16 workers have work)
+#   refine       the refiner against CGAL, 1 to 16 workers (torus, size 0.018: 2.6x the
+#                tetrahedra of the 2-core table's 0.025, so that 16 workers have work)
 #   parallel     1M points one at a time and in batch, 1 to 16 workers (uniform, normal,
 #                line), against CGAL sequential and parallel
 #   clustered    the clustered streams (clusters, kuzmin), 1 and 16 workers
@@ -21,8 +21,8 @@
 #   order given, so that what matters most comes first.
 # Environment: BIN, the folder of the Release binaries (default build); PDT_RECORD_COMMIT and
 # PDT_RECORD_NOTE as for record.sh, when the checkout has no git.
-# On our 16-core run at f1a4af4 the 1M scaling and the peers took about 210 and 90 s. On 2
-# cores the refiner's table at 1-16 workers takes about 40 s, bench_submit's two about 45 s.
+# On the 16-core machine at c4a9eb1 the steps took: submit 36 s, parallel 301, peers 78,
+# refine 28, interleaved 57, skewed about 170 (its trace included), clustered 99.
 set -u
 if [ $# -lt 1 ]; then
   echo "usage: $0 OUTDIR [SECONDS [STEP...]]" >&2
@@ -30,6 +30,10 @@ if [ $# -lt 1 ]; then
 fi
 out=$1
 limit=${2:-0}
+if ! [[ $limit =~ ^[0-9]+$ ]]; then
+  echo "$0: SECONDS must be a whole number of seconds (0: no limit), not '$limit'" >&2
+  exit 2
+fi
 shift $(($# >= 2 ? 2 : 1))
 steps=${*:-refine parallel clustered peers submit skewed interleaved}
 for s in $steps; do
@@ -52,16 +56,19 @@ done
 mkdir -p "$out"
 start=$(date +%s)
 status=0
-step() {  # OUT.txt BENCH ARGS...
-  local left=0
-  if [ "$limit" -gt 0 ]; then
-    left=$((start + limit - $(date +%s)))
-    if [ $left -lt 60 ]; then
-      echo "$0: skipped $1 ($left s left)" >&2
-      status=1
-      return
-    fi
+left=0  # seconds to the deadline (0: none), set by time_left
+time_left() {  # NAME: false, and says so, when less than a minute is left
+  left=0
+  [ "$limit" -gt 0 ] || return 0
+  left=$((start + limit - $(date +%s)))
+  if [ $left -lt 60 ]; then
+    echo "$0: skipped $1 ($left s left)" >&2
+    status=1
+    return 1
   fi
+}
+step() {  # OUT.txt BENCH ARGS...
+  time_left "$1" || return 0
   timeout "$left" bash "$here/record.sh" "$@" || status=1
 }
 for s in $steps; do
@@ -88,8 +95,9 @@ for s in $steps; do
     skewed)
       trace=$out/torus.ops
       if [ ! -s "$trace" ]; then
+        time_left "$out/skewed-300k-16cores.txt" || continue
         # Exit status 1 (a bound missed, unfinished) still writes the trace.
-        "$bin/pdt" refine --domain torus --size 0.022 --threads 2 --trace "$trace" > /dev/null
+        timeout "$left" "$bin/pdt" refine --domain torus --size 0.022 --threads 2 --trace "$trace" > /dev/null
       fi
       if [ -s "$trace" ]; then
         step "$out/skewed-300k-16cores.txt" "$bin/bench_parallel" --points 300000 --threads 1,4,16 \

@@ -168,8 +168,8 @@ class Refiner {
         if (extent_[i] / cuts_[i] > extent_[a] / cuts_[a]) a = i;
       cuts_[a] *= *f;
     }
-    for (double& e : extent_)
-      if (!(e > 0)) e = 1;
+    for (double& x : extent_)
+      if (!(x > 0)) x = 1;
     assert(static_cast<std::size_t>(cuts_[0]) * cuts_[1] * cuts_[2] == lanes_.size());
   }
 
@@ -377,8 +377,8 @@ class Refiner {
  private:
   void push(const Bad& b) {
     Lane& to = lanes_[lane_of(b.circumcentre)];
+    to.queue.push(b);  // counted once in (a push that throws counts nothing)
     to.pushed.fetch_add(1, std::memory_order_relaxed);
-    to.queue.push(b);
   }
   // The lane of the box holding p (cuts_ boxes of equal size along each
   // axis of the domain's box; a point off the box goes to the nearest box).
@@ -430,15 +430,15 @@ class Refiner {
         t = {best, true, 0};
         if (take(best, b)) return true;
         lanes_[best].held.store(false, std::memory_order_release), t.holds = false;
-        continue;  // emptied since it was counted
-      }
-      if (shared < lanes_.size()) {
+        // Emptied since it was counted (a count lags its queue while a cell
+        // is being taken): look everywhere once, below, rather than again.
+      } else if (shared < lanes_.size()) {
         t = {shared, false, shared_take - 1};
         if (take(shared, b)) return true;
-        continue;
       }
-      // Nothing counted: what a count has not shown yet (pushed after it was
-      // read) is taken in the next round (refine() runs rounds until empty).
+      // Nothing counted, or nothing where it was: any cell, from any lane. A
+      // cell pushed after this look is taken by a coroutine still running,
+      // or in the next round (refine() runs rounds until every lane is empty).
       for (std::size_t i = 0; i < lanes_.size(); ++i)
         if (take(i, b)) {
           t = {i, false, 0};
@@ -462,7 +462,8 @@ class Refiner {
   // each axis), a FIFO queue per box; the hook queues a bad cell in the
   // lane of its circumcentre. A refiner coroutine holds one lane at a time
   // and takes its cells until it is empty, then holds the fullest lane that
-  // nobody holds (pop); there are 8 lanes a coroutine, so that a lane is
+  // nobody holds (pop; when every lane with cells is held, it takes a few
+  // from the fullest of those); there are 8 lanes a coroutine, so that a lane is
   // free to take as a rule (a domain leaves many of its box's lanes empty).
   // So concurrent coroutines refine apart from
   // each other: neighbouring bad cells (queued together by one insertion)
@@ -583,9 +584,11 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
     pdt::Engine e(t, o.domain.box, eo, &arena);
     // Rounds: refiner coroutines until the queue is empty, then drain (the
     // operations still running may queue more cells), until nothing is left.
-    // A lane per coroutine when threads run concurrently (Refiner::Lane).
+    // 8 lanes a coroutine when threads run concurrently (Refiner::Lane),
+    // at most 4096 unless there are more coroutines (a look reads every
+    // lane's counts, and each lane's queue is about 1.4 KB).
     const unsigned coroutines = 4 * o.workers;
-    const unsigned lanes = threads > 1 ? 8 * coroutines : 1;
+    const unsigned lanes = threads > 1 ? std::max(coroutines, std::min(8 * coroutines, 4096u)) : 1;
     Refiner r(o, e, trace, lanes, std::move(samples));
     e.set_change_hook([&r](const pdt::Changes& c) { r.on_change(c); }, true);
     r.start();

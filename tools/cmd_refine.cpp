@@ -195,9 +195,9 @@ int cmd_refine(Args args) {
   row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
   std::snprintf(buf, sizeof buf,
                 "%.3f radius-edge (bound %.4g), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
-                "protected layer along the surface)",
+                "protected layer along the surface; %s inside too flat for doubles to place their circumcentre)",
                 q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
-                format_count(q.protected_layer).c_str());
+                format_count(q.protected_layer).c_str(), format_count(q.unplaced).c_str());
   row("worst inside", buf);
   std::snprintf(buf, sizeof buf,
                 "%.2f degrees smallest inside, %.2f among the judged; %s slivers under %.0f degrees inside (%s "

@@ -25,7 +25,15 @@ struct TetShape {
   double circumradius = 0;
   double shortest_edge = 0;
   double radius_edge = 0;  // circumradius / shortest edge
-  bool ok = false;          // false for a flat tetrahedron (no finite circumsphere)
+  // false for a flat tetrahedron (no finite circumsphere), and for one so
+  // nearly flat that doubles cannot place its circumcentre: the centre found
+  // is not equidistant from the four vertices (to 1e-6 of the radius). Four
+  // nearly cocircular, nearly coplanar points make one (a torus's surface
+  // samples mirrored across its plane of symmetry did): any sphere through
+  // their circle nearly passes through all four, and the centre computed
+  // lands anywhere on the circle's axis, so a point inserted there need not
+  // be in the tetrahedron's circumsphere at all.
+  bool ok = false;
 };
 
 // Computed relative to p[0], so the numbers stay small near the tetrahedron.
@@ -46,6 +54,13 @@ inline TetShape shape(const std::array<Point3, 4>& p) {
   s.shortest_edge = std::sqrt(shortest);
   s.radius_edge = s.shortest_edge > 0 ? s.circumradius / s.shortest_edge : HUGE_VAL;
   s.ok = std::isfinite(s.circumradius) && std::isfinite(s.radius_edge);
+  if (s.ok) {
+    // Squared distances from the centre to p[1..3] against the radius's
+    // (to p[0]); well-shaped and sliver tetrahedra agree to about 1e-13.
+    const double r2 = norm2(o), tolerance = 2e-6 * r2;
+    for (const Point3& v : {a, b, c})
+      if (!(std::fabs(dist2(o, v) - r2) <= tolerance)) s.ok = false;
+  }
   return s;
 }
 

@@ -650,6 +650,7 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
       if (dihedral < MeshQuality::sliver_degrees) ++q.slivers;
     }
     const TetShape s = shape(p);
+    if (!s.ok && d.f(centroid) < 0) ++q.unplaced;
     if (!s.ok || !(d.f(s.circumcentre) < 0)) return;
     if (samples.nearest_within(s.circumcentre, snap) >= 0) {
       ++q.protected_layer;
@@ -666,6 +667,7 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
     a.inside += b.inside;
     a.judged += b.judged;
     a.protected_layer += b.protected_layer;
+    a.unplaced += b.unplaced;
     a.violations += b.violations;
     a.worst_ratio = std::max(a.worst_ratio, b.worst_ratio);
     a.largest_radius = std::max(a.largest_radius, b.largest_radius);

@@ -18,7 +18,8 @@
 #   SECONDS (default 0: no limit) is a deadline for the whole run: a bench that would start
 #   with less than a minute left is skipped, one still running at the deadline is stopped
 #   (its file keeps what it printed). STEPs (default: all, in the order above) run in the
-#   order given, so that what matters most comes first.
+#   order given, each once, so that what matters most comes first; only the binaries they
+#   run need to be built.
 # Environment: BIN, the folder of the Release binaries (default build); PDT_RECORD_COMMIT and
 # PDT_RECORD_NOTE as for record.sh, when the checkout has no git.
 # On the 16-core machine at c4a9eb1 the steps took: submit 36 s, parallel 301, peers 78,
@@ -35,19 +36,28 @@ if ! [[ $limit =~ ^[0-9]+$ ]]; then
   exit 2
 fi
 shift $(($# >= 2 ? 2 : 1))
-steps=${*:-refine parallel clustered peers submit skewed interleaved}
-for s in $steps; do
+steps=""  # each step once, in the order first given
+needed=""  # the binaries those steps run
+for s in ${*:-refine parallel clustered peers submit skewed interleaved}; do
   case $s in
-    refine | parallel | clustered | peers | submit | skewed | interleaved) ;;
+    refine) needed="$needed bench_refine" ;;
+    parallel | clustered | interleaved) needed="$needed bench_parallel" ;;
+    peers) needed="$needed bench_peers" ;;
+    submit) needed="$needed bench_submit" ;;
+    skewed) needed="$needed bench_parallel pdt" ;;
     *)
       echo "$0: unknown step '$s' (refine, parallel, clustered, peers, submit, skewed, interleaved)" >&2
       exit 2
       ;;
   esac
+  case " $steps " in
+    *" $s "*) ;;
+    *) steps="$steps $s" ;;
+  esac
 done
 here=$(cd "$(dirname "$0")" && pwd)
 bin=${BIN:-$here/../build}
-for b in bench_parallel bench_peers bench_refine bench_submit pdt; do
+for b in $needed; do
   if [ ! -x "$bin/$b" ]; then
     echo "$0: $bin/$b is not built (cmake --build --preset release)" >&2
     exit 2

@@ -98,7 +98,7 @@ TEST_CASE("refine: a torus, with 1, 2 and 8 workers: Delaunay, within its bounds
       // refiner either (TetShape::ok); there are few.
       const double r2 = CGAL::squared_distance(c, p[0]);
       bool placed = std::isfinite(r2) && r2 > 0;
-      for (int i = 1; i < 4 && placed; ++i) placed = std::fabs(CGAL::squared_distance(c, p[i]) - r2) <= 2e-6 * r2;
+      for (int i = 1; i < 4 && placed; ++i) placed = std::fabs(CGAL::squared_distance(c, p[i]) - r2) <= pdt_refine::placed_tolerance * r2;
       if (!placed) {
         ++unplaced;
         continue;

@@ -36,6 +36,11 @@ struct TetShape {
   bool ok = false;
 };
 
+// How far the squared distances from a computed circumcentre to the four
+// vertices may differ, relative to the squared radius (about 1e-6 of the
+// radius), for the centre to count as placed (TetShape::ok).
+inline constexpr double placed_tolerance = 2e-6;
+
 // Computed relative to p[0], so the numbers stay small near the tetrahedron.
 inline TetShape shape(const std::array<Point3, 4>& p) {
   TetShape s;
@@ -57,7 +62,7 @@ inline TetShape shape(const std::array<Point3, 4>& p) {
   if (s.ok) {
     // Squared distances from the centre to p[1..3] against the radius's
     // (to p[0]); well-shaped and sliver tetrahedra agree to about 1e-13.
-    const double r2 = norm2(o), tolerance = 2e-6 * r2;
+    const double r2 = norm2(o), tolerance = placed_tolerance * r2;
     for (const Point3& v : {a, b, c})
       if (!(std::fabs(dist2(o, v) - r2) <= tolerance)) s.ok = false;
   }

@@ -223,9 +223,9 @@ class Refiner {
     Bad b;
     Taker taker;
     while (!stop_.load(std::memory_order_relaxed) && pop(taker, b)) {
-      const std::size_t home = taker.lane;
+      const std::size_t from = taker.lane;  // the lane b came from
       if (cells_.get(b.cell.id) != b.cell.incarnation) {
-        lanes_[home].dead.fetch_add(1, std::memory_order_relaxed);
+        lanes_[from].dead.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
       if (insertions_.load(std::memory_order_relaxed) >= o_.budget) {
@@ -253,7 +253,7 @@ class Refiner {
       // their (nearly equal) circumcentres in.
       const pdt::InsertResult r = co_await e_.insert_if_alive(b.circumcentre, b.cell);
       if (r.vertex == pdt::no_vertex) {
-        lanes_[home].died_queued.fetch_add(1, std::memory_order_relaxed);
+        lanes_[from].died_queued.fetch_add(1, std::memory_order_relaxed);
         insertions_.fetch_sub(1, std::memory_order_relaxed);
       } else {
         circumcentres_.fetch_add(1, std::memory_order_relaxed);
@@ -482,8 +482,8 @@ class Refiner {
   // ends, 30% of the cells were taken from a neighbour's lane, beside its
   // coroutine: 0.74 rollbacks an insertion at 16 workers on 16 cores. On
   // the torus at size 0.018 with 2 workers on 2 cores, held lanes took the
-  // rollbacks from 49-52k to 5.0-5.5k, the time from 2.15-3.21 s to
-  // 1.89 s, and the peak from 256 to 227 MiB, alternating runs.)
+  // rollbacks from 49-52k to 4.7-5.5k, the time from 2.13-3.21 s to
+  // 1.89-2.00 s, and the peak from 256 to 227 MiB, alternating runs.)
   // Counters are per lane, written by whichever thread pushes or pops there.
   struct alignas(64) Lane {
     tbb::concurrent_queue<Bad> queue;
@@ -644,13 +644,14 @@ MeshQuality measure(const pdt::Triangulation& t, const Domain& d, double size, d
     const Point3 centroid{(p[0].x + p[1].x + p[2].x + p[3].x) / 4, (p[0].y + p[1].y + p[2].y + p[3].y) / 4,
                           (p[0].z + p[1].z + p[2].z + p[3].z) / 4};
     const double dihedral = min_dihedral_degrees(p);
-    if (d.f(centroid) < 0) {
+    const bool inside = d.f(centroid) < 0;
+    if (inside) {
       ++q.inside;
       q.min_dihedral = std::min(q.min_dihedral, dihedral);
       if (dihedral < MeshQuality::sliver_degrees) ++q.slivers;
     }
     const TetShape s = shape(p);
-    if (!s.ok && d.f(centroid) < 0) ++q.unplaced;
+    if (!s.ok && inside) ++q.unplaced;
     if (!s.ok || !(d.f(s.circumcentre) < 0)) return;
     if (samples.nearest_within(s.circumcentre, snap) >= 0) {
       ++q.protected_layer;

@@ -91,10 +91,10 @@ struct MeshQuality {
   std::uint64_t inside = 0;        // tetrahedra whose centroid is inside the domain
   std::uint64_t judged = 0;        // tetrahedra whose circumcentre is inside and not in the protected layer
   std::uint64_t protected_layer = 0;  // tetrahedra whose circumcentre is inside, in a sample's snap radius
+  std::uint64_t violations = 0;    // of the judged, how many miss a bound
   // Tetrahedra inside (centroid) whose circumcentre doubles cannot place
   // (flat or nearly so: TetShape::ok); neither judged nor refined.
   std::uint64_t unplaced = 0;
-  std::uint64_t violations = 0;    // of those, how many miss a bound
   double worst_ratio = 0;          // largest radius-edge ratio among the judged
   double largest_radius = 0;       // largest circumradius among the judged
   double min_dihedral = 180;       // smallest dihedral angle among the inside, degrees

@@ -18,6 +18,8 @@ if [ ! -f "$dev/lib.tar.xz" ] || [ ! -x "$dev/bin/pdt" ] || [ ! -s "$dev/COMMIT"
   echo "$0: $dev holds no pack (run bench/device-pack.sh first, and carry $dev)" >&2
   exit 2
 fi
+# Bad arguments are refused before anything is unpacked.
+SCALING_CHECK_ONLY=1 bash "$here/scaling.sh" "$@" || exit 2
 [ -d "$dev/lib" ] || tar -C "$dev" -xJf "$dev/lib.tar.xz"
 # The carried libraries for our binaries only (wrappers), not for the system's
 # tools that the scripts call (lscpu, tar, ...), which have their own.

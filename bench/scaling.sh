@@ -21,7 +21,8 @@
 #   order given, each once, so that what matters most comes first; only the binaries they
 #   run need to be built.
 # Environment: BIN, the folder of the Release binaries (default build); PDT_RECORD_COMMIT and
-# PDT_RECORD_NOTE as for record.sh, when the checkout has no git.
+# PDT_RECORD_NOTE as for record.sh, when the checkout has no git; SCALING_CHECK_ONLY=1 checks
+# the arguments and exits (0 when they are good) without running or looking for binaries.
 # On the 16-core machine at c4a9eb1 the steps took: submit 36 s, parallel 301, peers 78,
 # refine 28, interleaved 57, skewed about 170 (its trace included), clustered 99.
 set -u
@@ -55,6 +56,7 @@ for s in ${*:-refine parallel clustered peers submit skewed interleaved}; do
     *) steps="$steps $s" ;;
   esac
 done
+[ "${SCALING_CHECK_ONLY:-0}" = 1 ] && exit 0
 here=$(cd "$(dirname "$0")" && pwd)
 bin=${BIN:-$here/../build}
 for b in $needed; do

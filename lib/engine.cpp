@@ -220,9 +220,11 @@ Engine::Engine(Triangulation& t, const Box& domain, EngineOptions options, tbb::
   if (!(options.contention_low >= 0 && options.contention_low <= options.contention_high &&
         options.contention_high <= 1))
     bad("contention thresholds must satisfy 0 <= contention_low <= contention_high <= 1");
+  const bool by_old_name = options.workers == 0 && options.threads != 0;
   if (options.workers == 0) options.workers = options.threads;  // the older name
   if (options.workers > EngineOptions::max_workers)
-    bad("workers must be at most " + std::to_string(EngineOptions::max_workers));
+    bad(std::string(by_old_name ? "threads (the deprecated name of workers)" : "workers") + " must be at most " +
+        std::to_string(EngineOptions::max_workers) + ", not " + std::to_string(options.workers));
   static_assert(EngineOptions::max_blocks_per_axis == detail::Partition::max_blocks_per_axis);
   if (options.blocks_per_axis > EngineOptions::max_blocks_per_axis)
     bad("blocks_per_axis must be at most " + std::to_string(EngineOptions::max_blocks_per_axis));

@@ -162,6 +162,13 @@ std::uint32_t Triangulation::Impl::new_context_id() {
   return id;
 }
 
+namespace {
+// Vertex incarnations for every triangulation of the process: a VertexHandle
+// from one triangulation (or from the one a moved-over object held before)
+// never names a vertex of another. 2^48 blocks: no wrap in practice.
+std::atomic<std::uint64_t> next_incarnation_block{0};
+}  // namespace
+
 std::uint64_t Triangulation::Impl::new_incarnation(OpContext& ctx) {
   if (ctx.incarnation_next == ctx.incarnation_end) {
     constexpr std::uint64_t block = std::uint64_t{1} << 16;

@@ -182,7 +182,29 @@ std::size_t Triangulation::number_of_finite_cells() const {
 std::size_t Triangulation::number_of_cells() const { return static_cast<std::size_t>(impl_->n_cells.load()); }
 bool Triangulation::is_vertex(VertexId v) const { return impl_->vertex_alive(v); }
 
+namespace {
+// The raw accessors' preconditions, refused by name rather than read past an
+// array: a vertex id that is_vertex() accepts, a cell id below
+// cell_id_bound() (live or free), a slot 0..3.
+void require_vertex(const Triangulation::Impl& m, VertexId v, const char* what) {
+  if (!m.vertex_alive(v))
+    throw Error(ErrorCode::unknown_vertex, std::string("Triangulation::") + what + "(" + std::to_string(v) +
+                                               "): not a live finite vertex (is_vertex(" + std::to_string(v) +
+                                               ") is false); ask is_vertex first");
+}
+void require_cell_slot(const Triangulation::Impl& m, CellId c, int i, const char* what) {
+  if (c >= m.cells.size())
+    throw Error(ErrorCode::invalid_argument, std::string("Triangulation::") + what + ": cell id " + std::to_string(c) +
+                                                 " is not below cell_id_bound() (" + std::to_string(m.cells.size()) +
+                                                 ")");
+  if (i < 0 || i > 3)
+    throw Error(ErrorCode::invalid_argument, std::string("Triangulation::") + what + ": slot " + std::to_string(i) +
+                                                 " of cell " + std::to_string(c) + "; a cell's slots are 0..3");
+}
+}  // namespace
+
 Point3 Triangulation::point(VertexId v) const {
+  require_vertex(*impl_, v, "point");
   const auto& p = impl_->pt(v);
   return {p.x(), p.y(), p.z()};
 }
@@ -214,7 +236,13 @@ VertexHandle Triangulation::vertex_handle(VertexId v) const {
   return {v, impl_->vertex_alive(v) ? impl_->verts[v].stamp.load(std::memory_order_relaxed) : 0};
 }
 
-CellHandle Triangulation::cell_handle(CellId c) const { return impl_->handle_of(c); }
+CellHandle Triangulation::cell_handle(CellId c) const {
+  if (!impl_->cell_alive(c))
+    throw Error(ErrorCode::invalid_argument, "Triangulation::cell_handle(" + std::to_string(c) +
+                                                 "): not a live cell (is_cell(" + std::to_string(c) +
+                                                 ") is false); ask is_cell first");
+  return impl_->handle_of(c);
+}
 
 std::optional<CellView> Triangulation::cell(CellHandle h) const {
   bool alive = false;
@@ -248,8 +276,14 @@ std::vector<VertexId> Triangulation::vertices() const {
 CellId Triangulation::cell_id_bound() const { return static_cast<CellId>(impl_->cells.size()); }
 bool Triangulation::is_cell(CellId c) const { return impl_->cell_alive(c); }
 bool Triangulation::is_finite_cell(CellId c) const { return impl_->cell_alive(c) && !impl_->cell_infinite(c); }
-VertexId Triangulation::cell_vertex(CellId c, int i) const { return impl_->cells[c].v[i]; }
-CellId Triangulation::cell_neighbor(CellId c, int i) const { return impl_->cells[c].n[i] >> 2; }
+VertexId Triangulation::cell_vertex(CellId c, int i) const {
+  require_cell_slot(*impl_, c, i, "cell_vertex");
+  return impl_->cells[c].v[i];
+}
+CellId Triangulation::cell_neighbor(CellId c, int i) const {
+  require_cell_slot(*impl_, c, i, "cell_neighbor");
+  return impl_->cells[c].n[i] >> 2;
+}
 VertexId Triangulation::vertex_id_bound() const { return static_cast<VertexId>(impl_->verts.size()); }
 
 bool Triangulation::validate(std::string* why) const { return impl_->validate(why); }

@@ -32,9 +32,10 @@
 //             search owns the marks it reads; the word is atomic (relaxed)
 //             because a reader holding another vertex of c may read the
 //             incarnation meanwhile.
-//   Vertex incarnations (VertexRec.stamp) come in blocks from a life-long
-//   source, and context ids (lock owners) from a life-long counter, so
-//   neither repeats however many engines come and go.
+//   Vertex incarnations (VertexRec.stamp) come in blocks from a source
+//   shared by every triangulation of the process, and context ids (lock
+//   owners) from a life-long counter, so neither repeats however many
+//   engines come and go (nor, for stamps, across triangulations).
 //
 // Invariants while dimension() == 3 (checked by validate()):
 //   I1 a live cell has 4 distinct live vertices; a free cell has v[0] == no_vertex
@@ -161,9 +162,8 @@ struct Triangulation::Impl {
 
   // Life-long sources (clear() keeps them).
   std::atomic<std::uint32_t> next_context_id{2};  // 1 is seq
-  std::atomic<std::uint64_t> next_incarnation_block{0};
   std::uint32_t new_context_id();
-  std::uint64_t new_incarnation(OpContext& ctx);
+  std::uint64_t new_incarnation(OpContext& ctx);  // from a source shared by the process (pools.cpp)
 
   // -- primitives ------------------------------------------------------------
   bool cell_alive(CellId c) const { return c < cells.size() && cells[c].v[0] != no_vertex; }

@@ -1388,6 +1388,21 @@ TEST_CASE("engine: the constructor checks its options and domain", "[engine]") {
     o = options_with(2);
     o.contention_low = -0.1;
     REQUIRE(error_of([&] { pdt::Engine e(t, unit, o); }) == pdt::ErrorCode::invalid_argument);
+    // Too many workers, by either name: the message names the field set.
+    for (const bool old_name : {false, true}) {
+      pdt::EngineOptions w;
+      (old_name ? w.threads : w.workers) = pdt::EngineOptions::max_workers + 1;
+      std::string what;
+      try {
+        pdt::Engine e(t, unit, w);
+      } catch (const pdt::Error& err) {
+        what = err.what();
+        CHECK(err.code() == pdt::ErrorCode::invalid_argument);
+      }
+      INFO(what);
+      CHECK(what.rfind(old_name ? "threads (the deprecated name of workers) must be at most" : "workers must be at most",
+                       0) == 0);
+    }
 
     for (pdt::Box b : {pdt::Box{{0, 0, 1}, {1, 1, 0}}, pdt::Box{{2, 0, 0}, {1, 1, 1}}, pdt::Box{{0, 3, 0}, {1, 1, 1}},
                        pdt::Box{{0, 0, 0}, {std::numeric_limits<double>::quiet_NaN(), 1, 1}},

@@ -1025,6 +1025,84 @@ TEST_CASE("stale and out-of-range hints are harmless", "[insert][hint]") {
   require_same_as_cgal(t, all);
 }
 
+TEST_CASE("the raw accessors refuse ids and slots out of range, naming the rule", "[insert][error]") {
+  // A client iterating ids must get an error for a slip, never a read past
+  // the records (found by an outside client: cell_vertex(0, 7) returned the
+  // word after the cell's four).
+  std::vector<Point3> pts = random_points(300, 211);
+  pdt::Triangulation t;
+  std::vector<pdt::VertexId> ids = insert_all(t, pts);
+  t.remove(ids[0]);
+  const pdt::CellId bound = t.cell_id_bound();
+  pdt::CellId live = 0;
+  while (!t.is_finite_cell(live)) ++live;
+  auto code_of = [](auto&& call) {
+    try {
+      call();
+    } catch (const pdt::Error& e) {
+      INFO(e.what());
+      CHECK(std::string(e.what()).find("Triangulation::") != std::string::npos);
+      return static_cast<int>(e.code());
+    }
+    return -1;
+  };
+  const int invalid = static_cast<int>(pdt::ErrorCode::invalid_argument);
+  const int unknown = static_cast<int>(pdt::ErrorCode::unknown_vertex);
+  CHECK(code_of([&] { (void)t.cell_vertex(live, 4); }) == invalid);
+  CHECK(code_of([&] { (void)t.cell_vertex(live, -1); }) == invalid);
+  CHECK(code_of([&] { (void)t.cell_neighbor(live, 7); }) == invalid);
+  CHECK(code_of([&] { (void)t.cell_vertex(bound, 0); }) == invalid);
+  CHECK(code_of([&] { (void)t.cell_neighbor(pdt::no_cell, 0); }) == invalid);
+  CHECK(code_of([&] { (void)t.cell_handle(bound + 5); }) == invalid);
+  CHECK(code_of([&] { (void)t.point(ids[0]); }) == unknown);  // removed
+  CHECK(code_of([&] { (void)t.point(pdt::infinite_vertex); }) == unknown);
+  CHECK(code_of([&] { (void)t.point(t.vertex_id_bound() + 9); }) == unknown);
+  CHECK(t.vertex_handle(ids[0]).incarnation == 0);
+  // In range, they answer as before.
+  for (int i = 0; i < 4; ++i) {
+    const pdt::VertexId w = t.cell_vertex(live, i);
+    REQUIRE(t.is_vertex(w));
+    const Point3 p = t.point(w);
+    CHECK(t.locate(p).kind == pdt::LocateKind::on_vertex);
+    const pdt::CellId n = t.cell_neighbor(live, i);
+    CHECK(t.is_cell(n));
+  }
+  CHECK(t.cell(t.cell_handle(live)).has_value());
+  require_valid(t);
+}
+
+TEST_CASE("a vertex handle reads as dead in any other triangulation, a moved-over one included", "[insert][error]") {
+  // Found by an outside client: after `t = Triangulation()` and the same
+  // points again, the old handles read live (incarnations were counted per
+  // triangulation, from 1), so remove(h) would have taken a vertex h never
+  // named.
+  const std::vector<Point3> pts = random_points(200, 212);
+  pdt::Triangulation t;
+  std::vector<pdt::VertexHandle> old;
+  for (const Point3& p : pts) old.push_back(t.insert(p).handle());
+  pdt::Triangulation other;
+  for (const Point3& p : pts) other.insert(p);
+  t = pdt::Triangulation();
+  for (const Point3& p : pts) t.insert(p);
+  for (const pdt::Triangulation* u : {&t, &other}) {
+    for (const pdt::VertexHandle& h : old) {
+      REQUIRE(u->is_vertex(h.id));  // the same ids are live again
+      CHECK_FALSE(u->is_vertex(h));
+    }
+  }
+  for (std::size_t k = 0; k < 10; ++k) {
+    try {
+      t.remove(old[k]);
+      FAIL("a handle of another triangulation was accepted");
+    } catch (const pdt::Error& e) {
+      CHECK(e.code() == pdt::ErrorCode::unknown_vertex);
+    }
+  }
+  CHECK(t.number_of_vertices() == pts.size());
+  require_valid(t);
+  require_same_as_cgal(t, pts);
+}
+
 TEST_CASE("extreme but finite coordinates equal CGAL", "[insert][extreme]") {
   // Coordinates are used exactly, whatever their magnitude: predicates are
   // exact; nothing else (point location, grids) may overflow or underflow.

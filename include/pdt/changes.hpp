@@ -8,7 +8,12 @@
 // now. A handle adds the incarnation, which is unique over the
 // triangulation's whole life for that id, so a stale handle is detected
 // (Triangulation::cell(h) returns nothing, Engine::visit reports the cell
-// dead) and never read as the cell that replaced it.
+// dead) and never read as the cell that replaced it. A vertex incarnation is
+// unique in the whole process, so a VertexHandle of one triangulation reads
+// as dead in any other (and after `t = Triangulation()`). A cell
+// incarnation is counted per id and triangulation: use a CellHandle only
+// with the triangulation that made it; clear() keeps the counts, so its
+// handles from before read as dead there.
 //
 // Keeping data per cell or vertex. Key it by id, and store the incarnation
 // beside it: an entry whose incarnation differs from the handle's is stale.

@@ -48,7 +48,10 @@
 //    operation that fails in flight reports its error in OpResult::error. An
 //    exception thrown by a callback, a change hook or a coroutine the engine
 //    resumed is caught, counted (EngineStats::client_errors), and the first
-//    one is rethrown by the next drain(); the engine goes on working.
+//    one is rethrown by the next drain(); the engine goes on working. A
+//    coroutine whose exception escapes ends suspended at its final point;
+//    the engine does not own its frame and leaves it to the handle's owner
+//    (a detached coroutine type leaks it: catch inside where that matters).
 //  - What cannot be refused: a callback or hook that blocks until another
 //    thread's drain() returns, or until an operation it submitted completes,
 //    waits for itself (drain() waits for the callback) and hangs. Callbacks

@@ -164,8 +164,8 @@ class Triangulation {
   std::size_t number_of_cells() const;           // finite + infinite
   bool is_vertex(VertexId v) const;              // a live finite vertex
   bool is_vertex(VertexHandle v) const;          // that incarnation is live
-  VertexHandle vertex_handle(VertexId v) const;  // precondition: is_vertex(v)
-  Point3 point(VertexId v) const;                // precondition: is_vertex(v)
+  VertexHandle vertex_handle(VertexId v) const;  // a dead handle (incarnation 0) unless is_vertex(v)
+  Point3 point(VertexId v) const;                // pdt::Error (unknown_vertex) unless is_vertex(v)
   std::uint32_t multiplicity(VertexId v) const;  // 0 if not a vertex
   LocateResult locate(const Point3& p, Hint hint = {}) const;
   // The vertex nearest to p; no_vertex if empty. In dimension 3 a walk and a
@@ -179,14 +179,16 @@ class Triangulation {
   std::vector<VertexId> vertices() const;
   // Raw access for iteration without copies: ids below cell_id_bound() may be
   // live or free; is_cell() tells. A cell's facet i is opposite vertex i;
-  // neighbor(c, i) shares that facet.
+  // neighbor(c, i) shares that facet. cell_vertex and cell_neighbor refuse
+  // (pdt::Error, invalid_argument) a c not below cell_id_bound() or an i
+  // outside 0..3; what they return for a free cell means nothing.
   CellId cell_id_bound() const;
   bool is_cell(CellId c) const;
   bool is_finite_cell(CellId c) const;
   VertexId cell_vertex(CellId c, int i) const;
   CellId cell_neighbor(CellId c, int i) const;
   VertexId vertex_id_bound() const;
-  CellHandle cell_handle(CellId c) const;          // precondition: is_cell(c)
+  CellHandle cell_handle(CellId c) const;          // pdt::Error (invalid_argument) unless is_cell(c)
   // The cell of h if that incarnation is still live; nothing if it died.
   std::optional<CellView> cell(CellHandle h) const;
 

@@ -26,9 +26,7 @@ OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& 
       if (!op.only_if_alive && !op.from_batch) TicketTable::prefetch(ticket_position(op));
       const VertexId hint = op.from_batch ? w.last_inserted : no_vertex;
       Triangulation::Impl::Inserted out;
-      ctx.large_batch = op.from_batch;  // its vertices not noted in the grid one by one (OpContext)
       const OpStatus s = impl.insert(ctx, to_kpoint(op.point), hint, out, op.only_if_alive ? &op.cell : nullptr);
-      ctx.large_batch = false;
       if (s == OpStatus::done) {
         r.insert = out.result;
         stamp = out.stamp;

@@ -376,6 +376,15 @@ OpRecord* make_record(EngineState& e, Request& q) {
 
 bool OpAwaitBase::await_suspend(std::coroutine_handle<> h) {
   waiter = h;
+  if (!engine || awaited) {
+    result.error = std::make_exception_ptr(
+        Error(ErrorCode::invalid_argument,
+              !engine ? "this engine awaitable was moved from; await the one it was moved to"
+                      : "this engine awaitable was awaited before; each is one operation, awaited once "
+                        "(call engine.insert(), remove(), ... again for another)"));
+    return false;  // await_resume throws it
+  }
+  awaited = true;
   EngineState& e = *engine->state_;
   OpRecord* op;
   try {

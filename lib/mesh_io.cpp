@@ -11,6 +11,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -65,8 +66,10 @@ void refuse_unwritable(const Mesh& mesh, const char* who) {
                                                      std::to_string(n) + " points");
 }
 
-// A field name as an XML attribute value: & < > " ' escaped, so that any
-// name gives a file XML parsers (ParaView's) read, and reads back as given.
+// A field name as an XML attribute value: & < > " ' escaped, and tab,
+// newline and carriage return as character references (a parser turns them
+// into spaces otherwise), so that a name refuse_unreadable_name accepts gives
+// a file XML parsers (ParaView's) read, and reads back as given.
 std::string xml_attribute(const std::string& s) {
   std::string out;
   out.reserve(s.size());
@@ -76,9 +79,66 @@ std::string xml_attribute(const std::string& s) {
       case '>': out += "&gt;"; break;
       case '"': out += "&quot;"; break;
       case '\'': out += "&apos;"; break;
+      case '\t': out += "&#9;"; break;
+      case '\n': out += "&#10;"; break;
+      case '\r': out += "&#13;"; break;
       default: out += c;
     }
   return out;
+}
+
+// Where the name stops being text an XML 1.0 attribute can hold: the byte
+// offset of the first byte that is not valid UTF-8 (an overlong form, a
+// surrogate, past U+10FFFF) or starts a character XML excludes (controls
+// other than tab, newline and carriage return; U+FFFE, U+FFFF); npos if none.
+std::size_t first_non_xml_byte(const std::string& s) {
+  const auto* b = reinterpret_cast<const unsigned char*>(s.data());
+  const std::size_t n = s.size();
+  for (std::size_t i = 0; i < n;) {
+    const unsigned c = b[i];
+    if (c < 0x80) {
+      if (c < 0x20 && c != '\t' && c != '\n' && c != '\r') return i;
+      ++i;
+      continue;
+    }
+    std::size_t len = 0;
+    unsigned lo = 0x80, hi = 0xBF;  // the second byte's range
+    if (c >= 0xC2 && c <= 0xDF) len = 2;
+    else if (c == 0xE0) len = 3, lo = 0xA0;
+    else if ((c >= 0xE1 && c <= 0xEC) || c == 0xEE || c == 0xEF) len = 3;
+    else if (c == 0xED) len = 3, hi = 0x9F;  // not a surrogate
+    else if (c == 0xF0) len = 4, lo = 0x90;
+    else if (c >= 0xF1 && c <= 0xF3) len = 4;
+    else if (c == 0xF4) len = 4, hi = 0x8F;  // at most U+10FFFF
+    if (len == 0 || i + len > n || b[i + 1] < lo || b[i + 1] > hi) return i;
+    for (std::size_t k = 2; k < len; ++k)
+      if (b[i + k] < 0x80 || b[i + k] > 0xBF) return i;
+    if (c == 0xEF && b[i + 1] == 0xBF && b[i + 2] >= 0xBE) return i;  // U+FFFE, U+FFFF
+    i += len;
+  }
+  return std::string::npos;
+}
+
+// A cell field VTK's reader (and so ParaView) cannot read back by its name:
+// no name (the array would have none), a name given twice (the reader
+// crashes), a name XML cannot hold.
+void refuse_unreadable_names(std::span<const CellField> fields) {
+  for (std::size_t k = 0; k < fields.size(); ++k) {
+    const std::string& name = fields[k].name;
+    const std::string which = "write_vtu: cell field " + std::to_string(k);
+    if (name.empty()) throw Error(ErrorCode::invalid_argument, which + " has no name; VTK reads an array by its name");
+    if (const std::size_t at = first_non_xml_byte(name); at != std::string::npos) {
+      static const char hex[] = "0123456789ABCDEF";
+      const auto byte = static_cast<unsigned char>(name[at]);
+      throw Error(ErrorCode::invalid_argument, which + "'s name has byte 0x" + hex[byte >> 4] + hex[byte & 15] +
+                                                   " at offset " + std::to_string(at) +
+                                                   ", which is not UTF-8 text an XML file can hold");
+    }
+    for (std::size_t j = 0; j < k; ++j)
+      if (fields[j].name == name)
+        throw Error(ErrorCode::invalid_argument, which + " is named '" + name + "' as field " + std::to_string(j) +
+                                                     " is; VTK needs distinct names");
+  }
 }
 
 }  // namespace
@@ -224,6 +284,7 @@ void put_ascii(detail::OutputFile& out, const T* v, std::size_t n, std::size_t p
 void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, std::span<const CellField> cell_fields) {
   refuse_nameless(path, "write_vtu", false);
   refuse_unwritable(mesh, "write_vtu");
+  refuse_unreadable_names(cell_fields);
   for (const CellField& f : cell_fields)
     if (f.values.size() != mesh.tets.size())
       throw Error(ErrorCode::invalid_argument, "write_vtu: cell field '" + f.name + "' has " +

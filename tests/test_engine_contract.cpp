@@ -18,11 +18,13 @@
 #include <cmath>
 #include <coroutine>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <set>
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "common/cgal_reference.hpp"
@@ -520,6 +522,70 @@ TEST_CASE("contract: a rethrowing coroutine, throwing callbacks and hooks: drain
     REQUIRE(e.stats().total().completed == pts.size() + 100);
   });
   REQUIRE(t.number_of_vertices() == pts.size() + 100);
+  require_valid(t);
+}
+
+namespace {
+// What awaiting an awaitable again, or one moved from, gave.
+struct Reawaited {
+  bool first_inserted = false, moved_to_inserted = false;
+  std::string again, moved_from;  // the errors' messages
+  std::optional<pdt::ErrorCode> again_code, moved_from_code;
+  std::atomic<bool> done{false};
+};
+
+Detached await_again(pdt::Engine& e, Point3 p, Point3 q, Reawaited& out) {
+  try {
+    pdt::InsertAwaitable a = e.insert(p);
+    out.first_inserted = (co_await a).inserted;
+    try {
+      (void)co_await a;  // the same operation again
+    } catch (const pdt::Error& x) {
+      out.again = x.what();
+      out.again_code = x.code();
+    }
+    pdt::InsertAwaitable b = e.insert(q);
+    pdt::InsertAwaitable c = std::move(b);
+    try {
+      (void)co_await b;
+    } catch (const pdt::Error& x) {
+      out.moved_from = x.what();
+      out.moved_from_code = x.code();
+    }
+    out.moved_to_inserted = (co_await c).inserted;
+  } catch (...) {
+  }
+  out.done.store(true);
+}
+}  // namespace
+
+TEST_CASE("contract: an awaitable is one operation: move-only, and awaiting it again or moved from is refused",
+          "[engine][contract][tsan]") {
+  static_assert(!std::is_copy_constructible_v<pdt::InsertAwaitable>);
+  static_assert(!std::is_copy_assignable_v<pdt::RemoveAwaitable>);
+  static_assert(std::is_nothrow_move_constructible_v<pdt::VisitAwaitable>);
+  pdt::Triangulation t;
+  tbb::task_arena arena(2);
+  const Point3 p{0.25, 0.5, 0.5}, q{0.75, 0.5, 0.5};
+  Reawaited out;
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(2));
+    for (const Point3& r : random_points(200, 33)) e.insert(r, {});
+    await_again(e, p, q, out);
+    REQUIRE(wait_for(e, [&] { return out.done.load(); }));
+    e.drain();
+    REQUIRE(e.stats().client_errors == 0);
+  });
+  CHECK(out.first_inserted);
+  REQUIRE(out.again_code == pdt::ErrorCode::invalid_argument);
+  CHECK(out.again.find("awaited before; each is one operation, awaited once") != std::string::npos);
+  REQUIRE(out.moved_from_code == pdt::ErrorCode::invalid_argument);
+  CHECK(out.moved_from.find("was moved from") != std::string::npos);
+  CHECK(out.moved_to_inserted);
+  // Each point went in once.
+  REQUIRE(t.number_of_vertices() == 202);
+  CHECK(t.multiplicity(t.locate(p).vertex) == 1);
+  CHECK(t.multiplicity(t.locate(q).vertex) == 1);
   require_valid(t);
 }
 

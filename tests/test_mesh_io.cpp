@@ -515,6 +515,49 @@ TEST_CASE("write_vtu writes a VTK UnstructuredGrid of tetrahedra", "[io]") {
   const std::string y = pdt_test::read_file(p);
   CHECK(y.find("Name=\"quality &quot;&lt;a&amp;b&gt;&quot; &apos;q&apos;\" format=\"ascii\">") != std::string::npos);
   CHECK(y.find("<a&b>") == std::string::npos);
+
+  // Tab, newline and carriage return as character references (a parser
+  // reads them as spaces otherwise); UTF-8 as it is.
+  const std::vector<pdt::CellField> spaced{{"a\tb\nc\rd \xC3\xA9\xE2\x82\xAC\xF0\x9F\x98\x80", {0.5, 0.25}}};
+  pdt::write_vtu(p, m, pdt::VtuEncoding::ascii, spaced);
+  CHECK(pdt_test::read_file(p).find("Name=\"a&#9;b&#10;c&#13;d \xC3\xA9\xE2\x82\xAC\xF0\x9F\x98\x80\" format=\"ascii\">") !=
+        std::string::npos);
+}
+
+TEST_CASE("write_vtu refuses cell fields VTK cannot read by name, and writes nothing", "[io]") {
+  TempDir d;
+  pdt::Mesh m;
+  m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  m.tets = {{0, 1, 2, 3}};
+  const std::string p = d.file("m.vtu");
+  pdt::write_vtu(p, m, pdt::VtuEncoding::ascii);
+  const std::string before = pdt_test::read_file(p);
+  struct Case {
+    std::vector<pdt::CellField> fields;
+    const char* says;
+  };
+  const std::vector<Case> cases = {
+      {{{"", {1.0}}}, "cell field 0 has no name"},
+      {{{"q", {1.0}}, {"r", {2.0}}, {"q", {3.0}}}, "cell field 2 is named 'q' as field 0 is; VTK needs distinct names"},
+      {{{"q", {1.0}}, {"\xFF\xFE", {2.0}}}, "cell field 1's name has byte 0xFF at offset 0"},
+      {{{"ab\x01", {1.0}}}, "byte 0x01 at offset 2"},
+      {{{std::string("a\0b", 3), {1.0}}}, "byte 0x00 at offset 1"},
+      {{{"\xC0\xAF", {1.0}}}, "byte 0xC0 at offset 0"},          // overlong '/'
+      {{{"x\xED\xA0\x80", {1.0}}}, "byte 0xED at offset 1"},     // a surrogate
+      {{{"\xEF\xBF\xBF", {1.0}}}, "byte 0xEF at offset 0"},      // U+FFFF
+      {{{"\xF4\x90\x80\x80", {1.0}}}, "byte 0xF4 at offset 0"},  // past U+10FFFF
+      {{{"\xE2\x82", {1.0}}}, "byte 0xE2 at offset 0"},          // cut short
+  };
+  for (const Case& c : cases)
+    for (pdt::VtuEncoding enc : {pdt::VtuEncoding::zlib, pdt::VtuEncoding::raw, pdt::VtuEncoding::ascii}) {
+      INFO(c.says);
+      auto e = catch_error([&] { pdt::write_vtu(p, m, enc, c.fields); });
+      REQUIRE(e);
+      CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+      CHECK(std::string(e->what()).find(c.says) != std::string::npos);
+      CHECK(pdt_test::read_file(p) == before);
+      CHECK(d.entries() == 1);
+    }
 }
 
 TEST_CASE("writers write through a symbolic link and into a FIFO, replacing neither", "[io]") {

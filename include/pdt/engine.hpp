@@ -68,6 +68,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <oneapi/tbb/task_arena.h>
@@ -135,11 +136,35 @@ struct Request {
   CellVisitor visitor;  // visit
   bool only_if_alive = false;
 };
+// One operation: submitted by its first co_await. So it is move-only (a
+// copy would be a second submission of the same request), and awaiting it
+// again, or awaiting what it was moved from, is refused (pdt::Error,
+// invalid_argument, from the co_await) rather than run twice.
+// Invariant: engine == nullptr once moved from; awaited once submitted.
 struct OpAwaitBase {
   Engine* engine = nullptr;
   Request request;
   OpResult result;
   std::coroutine_handle<> waiter;
+  bool awaited = false;
+  OpAwaitBase() = default;
+  OpAwaitBase(const OpAwaitBase&) = delete;
+  OpAwaitBase& operator=(const OpAwaitBase&) = delete;
+  OpAwaitBase(OpAwaitBase&& o) noexcept
+      : engine(std::exchange(o.engine, nullptr)),
+        request(std::move(o.request)),
+        result(std::move(o.result)),
+        waiter(o.waiter),
+        awaited(o.awaited) {}
+  OpAwaitBase& operator=(OpAwaitBase&& o) noexcept {
+    engine = std::exchange(o.engine, nullptr);
+    request = std::move(o.request);
+    result = std::move(o.result);
+    waiter = o.waiter;
+    awaited = o.awaited;
+    return *this;
+  }
+  ~OpAwaitBase() = default;
   bool await_ready() const noexcept { return false; }
   bool await_suspend(std::coroutine_handle<> h);  // false: refused at once; await_resume throws
 };
@@ -150,7 +175,8 @@ inline void take(const OpResult& r, VertexId& out) { out = r.nearest; }
 inline void take(const OpResult& r, bool& out) { out = r.alive; }
 }  // namespace detail
 
-// co_await engine.insert(p) and friends: T is what co_await gives.
+// co_await engine.insert(p) and friends: T is what co_await gives. Each is
+// one operation, run when first awaited: move-only, awaited once (OpAwaitBase).
 template <class T>
 class [[nodiscard]] OpAwaitable : public detail::OpAwaitBase {
  public:

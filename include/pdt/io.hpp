@@ -41,8 +41,10 @@ struct CellField {
 
 // TetGen: path.node + path.ele (path given with or without extension),
 // 0-based numbering. VTK: .vtu UnstructuredGrid ParaView opens, with
-// optional cell fields (invalid_argument if one's size differs from the
-// tetrahedra's). A tetrahedron naming a point that is not there, or a point
+// optional cell fields, refused (invalid_argument) if one's size differs
+// from the tetrahedra's, or its name is empty, given twice, or not UTF-8
+// text XML can hold (controls other than tab, newline and carriage return
+// excluded): VTK reads an array by its name. A tetrahedron naming a point that is not there, or a point
 // with a NaN or infinite coordinate, is refused (invalid_argument) before
 // anything is written, and so is a path that names no file ("", a folder
 // "out/", or for TetGen ".node" alone). Writes go through a temporary file

@@ -1298,6 +1298,17 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     const pdt::EngineOptions plain = pdt::EngineOptions::from_environment();
     REQUIRE(plain.workers == 0);
   }
+  SECTION("set to the empty string: as unset") {
+    ::setenv("PDT_WORKERS", "", 1);
+    ::setenv("PDT_CONTENTION_LOW", "", 1);
+    pdt::EngineOptions d;
+    d.workers = 7;
+    const pdt::EngineOptions o = pdt::EngineOptions::from_environment(d);
+    ::unsetenv("PDT_WORKERS");
+    ::unsetenv("PDT_CONTENTION_LOW");
+    REQUIRE(o.workers == 7);
+    REQUIRE(o.contention_low == 0.7);
+  }
   SECTION("PDT_THREADS, the 0.1 name of PDT_WORKERS, still counts; PDT_WORKERS wins") {
     EnvGuard env;
     env.set("PDT_THREADS", "3");

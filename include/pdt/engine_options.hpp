@@ -46,8 +46,10 @@ struct EngineOptions {
   // the result is the same triangulation either way.
   bool rebalance = true;
 
-  // Starts from `defaults` and overrides each field whose variable is set:
-  // a plain decimal number (no sign, spaces or hex; whole for integer
+  // Starts from `defaults` and overrides each field whose variable is set
+  // to a non-empty value (an empty one counts as unset): a plain decimal
+  // number (digits and at most one '.', then for the contention thresholds
+  // an optional exponent: no sign, spaces, hex or "inf"; whole for integer
   // fields), in the field's range (contention thresholds and the 0/1 flags
   // included). Throws pdt::Error(invalid_argument) naming the variable and
   // the range for a bad value.

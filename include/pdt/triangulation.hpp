@@ -107,8 +107,10 @@ struct TriangulationStats {
 class Triangulation {
  public:
   // Throws pdt::Error (invalid_argument) if PDT_HUGE_PAGES is set to anything
-  // but 0 or 1 (README, Design, Huge pages), std::bad_alloc if the address
-  // space for its arrays cannot be reserved.
+  // but 0 or 1 (README, Design, Huge pages; empty counts as unset), std::bad_alloc
+  // if the address space for its arrays cannot be reserved. The variable is
+  // read once per process, by the first construction that reads a valid
+  // value: changing it later changes nothing.
   Triangulation();
   // Destroying a triangulation while an engine is attached to it breaks the
   // rule that it outlives its engine: the process stops (std::abort) with a
@@ -197,6 +199,10 @@ class Triangulation {
   // Returns true when all hold; otherwise false and, if why is given, what failed.
   bool validate(std::string* why = nullptr) const;
 
+  // What this triangulation's own operations did. An attached engine's
+  // workers count theirs apart and add them here when the engine is
+  // destroyed; until then they are not in it (Engine::stats() counts the
+  // engine's operations meanwhile).
   const TriangulationStats& stats() const;
   std::size_t memory_bytes() const;  // bytes held by cell and vertex storage and the jump grid
 

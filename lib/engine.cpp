@@ -379,7 +379,8 @@ bool OpAwaitBase::await_suspend(std::coroutine_handle<> h) {
   if (!engine || awaited) {
     result.error = std::make_exception_ptr(
         Error(ErrorCode::invalid_argument,
-              !engine ? "this engine awaitable was moved from; await the one it was moved to"
+              !engine ? "this engine awaitable holds no operation: it was moved from (await the one it was moved "
+                        "to), or made without engine.insert() and the others"
                       : "this engine awaitable was awaited before; each is one operation, awaited once "
                         "(call engine.insert(), remove(), ... again for another)"));
     return false;  // await_resume throws it

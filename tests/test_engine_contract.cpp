@@ -530,7 +530,7 @@ namespace {
 struct Reawaited {
   bool first_inserted = false, moved_to_inserted = false;
   std::string again, moved_from;  // the errors' messages
-  std::optional<pdt::ErrorCode> again_code, moved_from_code;
+  std::optional<pdt::ErrorCode> again_code, moved_from_code, made_empty_code;
   std::atomic<bool> done{false};
 };
 
@@ -553,6 +553,12 @@ Detached await_again(pdt::Engine& e, Point3 p, Point3 q, Reawaited& out) {
       out.moved_from_code = x.code();
     }
     out.moved_to_inserted = (co_await c).inserted;
+    pdt::LocateAwaitable made_empty;  // not from an Engine method
+    try {
+      (void)co_await made_empty;
+    } catch (const pdt::Error& x) {
+      out.made_empty_code = x.code();
+    }
   } catch (...) {
   }
   out.done.store(true);
@@ -582,6 +588,7 @@ TEST_CASE("contract: an awaitable is one operation: move-only, and awaiting it a
   REQUIRE(out.moved_from_code == pdt::ErrorCode::invalid_argument);
   CHECK(out.moved_from.find("was moved from") != std::string::npos);
   CHECK(out.moved_to_inserted);
+  CHECK(out.made_empty_code == pdt::ErrorCode::invalid_argument);
   // Each point went in once.
   REQUIRE(t.number_of_vertices() == 202);
   CHECK(t.multiplicity(t.locate(p).vertex) == 1);

@@ -138,9 +138,10 @@ struct Request {
 };
 // One operation: submitted by its first co_await. So it is move-only (a
 // copy would be a second submission of the same request), and awaiting it
-// again, or awaiting what it was moved from, is refused (pdt::Error,
-// invalid_argument, from the co_await) rather than run twice.
-// Invariant: engine == nullptr once moved from; awaited once submitted.
+// again, or awaiting what it was moved from (or one default-constructed),
+// is refused (pdt::Error, invalid_argument, from the co_await) rather than
+// run twice. Invariant: engine == nullptr once moved from (and until an
+// Engine method fills it in); awaited once submitted.
 struct OpAwaitBase {
   Engine* engine = nullptr;
   Request request;

@@ -19,6 +19,10 @@ TicketPosition ticket_position(const OpRecord& op) { return {op.ticket_range, op
 // The kernel call
 // ---------------------------------------------------------------------------
 OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& r, std::uint64_t& stamp) {
+  struct Inside {  // ops_on_this_thread: the hook and the visitor run in here
+    Inside() { ++ops_on_this_thread; }
+    ~Inside() { --ops_on_this_thread; }
+  } inside;
   switch (op.kind) {
     case OpKind::insert: {
       // finish_inserted's slot, fetched meanwhile (a large batch's slots are
@@ -51,12 +55,7 @@ OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& 
       // The visitor runs while the anchor is held; what it throws is the
       // client's, not the operation's.
       const CellVisitor guarded = [&](const CellView& view) {
-        if (!op.visitor) return;
-        try {
-          op.visitor(view);
-        } catch (...) {
-          record_client_error(std::current_exception());
-        }
+        if (op.visitor) run_client([&] { op.visitor(view); });
       };
       return impl.find_cell(ctx, op.cell, &r.alive, nullptr, &guarded);
     }
@@ -179,21 +178,9 @@ void EngineState::complete(Worker& w, OpRecord* opp, OpResult& r, std::uint64_t 
     tickets.release(op.ticket);
   }
   w.completed.fetch_add(1, std::memory_order_relaxed);
-  if (op.done) {
-    try {
-      op.done(r);
-    } catch (...) {
-      record_client_error(std::current_exception());
-    }
-  }
+  if (op.done) run_client([&] { op.done(r); });
   if (BatchCallback* batch_done = op.batch_done) {
-    if (batch_done->fn) {
-      try {
-        batch_done->fn(r);
-      } catch (...) {
-        record_client_error(std::current_exception());
-      }
-    }
+    if (batch_done->fn) run_client([&] { batch_done->fn(r); });
     if (batch_done != w.batch_done_unpublished) {
       publish_batch_done(w);
       w.batch_done_unpublished = batch_done;

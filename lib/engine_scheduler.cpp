@@ -12,9 +12,14 @@
 namespace pdt::detail {
 
 thread_local const EngineState* EngineState::running_engine = nullptr;
+thread_local unsigned EngineState::ops_on_this_thread = 0;
 
 void EngineState::spawn(std::coroutine_handle<> h) {
   auto task = [this, h] {
+    if (ops_on_this_thread != 0) {  // taken by client code inside an operation: later, elsewhere
+      spawn(h);
+      return;
+    }
     const EngineState* outer = running_engine;
     running_engine = this;
     try {

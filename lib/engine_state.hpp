@@ -289,6 +289,16 @@ struct EngineState {
   // std::bad_alloc, before anything changed.
   OpRecord* make_undo(std::uint64_t t, const TicketView& view, Engine::Callback done, BatchCallback* batch_done);
   void record_client_error(std::exception_ptr e);
+  // Runs client code on a worker (a callback, a visitor; the change hook
+  // does the same): what it throws is counted, not propagated.
+  template <class F>
+  void run_client(F&& f) {
+    try {
+      f();
+    } catch (...) {
+      record_client_error(std::current_exception());
+    }
+  }
 
   // -- scheduling (engine_scheduler.cpp) -----------------------------------------
   // Runs h (a worker body or a coroutine awaiting a result) as a task of
@@ -297,6 +307,16 @@ struct EngineState {
   void spawn(std::coroutine_handle<> h);
   // The engine whose task the current thread is running, if any.
   static thread_local const EngineState* running_engine;
+  // Operations (of any engine) the current thread is inside (run_op). A
+  // hook or visitor runs inside its operation, and one that enters the arena
+  // again (task_arena::execute, to run a parallel_for "in my arena") lets
+  // the thread take the engines' queued tasks while it waits; a worker body
+  // run there, on top of the operation, could wait for that operation to end
+  // (stopping the world waits for every worker to leave its operation) or
+  // roll back on its locks without end: a deadlock. So while this is not 0,
+  // spawn's tasks do not run here: each is queued again, for a thread
+  // outside any operation.
+  static thread_local unsigned ops_on_this_thread;
   void enqueue(Block& b, OpRecord* op);  // push and make sure someone serves b (op already counted)
   // Pushes op into b, counted first in b.queued and then marked in `nonempty`
   // (the order NonEmptyBlocks relies on, seq_cst). Every push goes through

@@ -4,6 +4,7 @@
 // thread-safe queries, clients that misbehave (rethrowing coroutines,
 // throwing callbacks and hooks, a cancelled parallel_for, destroying the
 // engine from its own callback), and progress for every single operation.
+#include <oneapi/tbb/global_control.h>
 #include <oneapi/tbb/parallel_for.h>
 #include <oneapi/tbb/task_arena.h>
 
@@ -11,6 +12,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -594,6 +596,89 @@ TEST_CASE("contract: an awaitable is one operation: move-only, and awaiting it a
   CHECK(t.multiplicity(t.locate(p).vertex) == 1);
   CHECK(t.multiplicity(t.locate(q).vertex) == 1);
   require_valid(t);
+}
+
+TEST_CASE("contract: hooks, callbacks and visitors may wait for TBB algorithms of their own in the engine's arena",
+          "[engine][contract]") {
+  // A refiner judges the cells an operation made with a parallel_for, in its
+  // application's arena, which is the engine's: task_arena::execute, which
+  // lets the waiting thread take the arena's queued tasks. So a worker's
+  // thread, waiting in its hook, took another worker's task on top of its own
+  // operation, whose operations then rolled back on that operation's locks,
+  // escalated (escalate_after = 4 here) and waited for it to end: a deadlock,
+  // in about half the rounds of this size before
+  // EngineState::ops_on_this_thread. A watchdog turns one into a failure that
+  // says so.
+  std::atomic<bool> finished{false};
+  std::thread watchdog([&] {
+    for (int i = 0; i < 900 && !finished.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (!finished.load()) {
+      std::fprintf(stderr, "client code waiting for TBB work in the engine's arena: no progress in 90 s (deadlock)\n");
+      std::_Exit(3);
+    }
+  });
+  pdt::Triangulation t;
+  Expected expected;
+  tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 8);  // 8 threads, even on 2 cores
+  tbb::task_arena arena(8);
+  std::atomic<std::uint64_t> judged{0}, called{0}, visited{0};
+  std::uint64_t submitted = 0;
+  const std::size_t per_round = scaled(10000, 2000);
+  arena.execute([&] {
+    pdt::EngineOptions o = options_with(8);
+    o.escalate_after = 4;
+    pdt::Engine e(t, kUnit, o);
+    std::mutex seen_mutex;
+    std::vector<pdt::CellHandle> seen;  // cells to visit
+    e.set_change_hook([&](const pdt::Changes& c) {
+      arena.execute([&] {
+        tbb::parallel_for(std::size_t{0}, c.created.size(), [&](std::size_t) {
+          volatile double x = 0;
+          for (int k = 0; k < 5000; ++k) x = x + k * 1e-9;  // judging a cell: a few microseconds
+          judged.fetch_add(1);
+        });
+      });
+      std::lock_guard<std::mutex> hold(seen_mutex);
+      if (!c.created.empty() && seen.size() < 200) seen.push_back(c.created.front().handle);
+    });
+    for (int round = 0; round < 3; ++round) {
+      const std::vector<Point3> pts = random_points(per_round, 900 + round);
+      std::vector<pdt::Engine::Ticket> tickets;
+      for (const Point3& p : pts) {
+        tickets.push_back(e.insert(p, [&](const pdt::OpResult&) {
+          arena.execute([&] { tbb::parallel_for(0, 4, [&](int) { called.fetch_add(1); }); });
+        }));
+        expected.points.push_back(p);
+      }
+      submitted += pts.size();
+      e.drain();
+      for (std::size_t i = 0; i < pts.size(); i += 3) {
+        e.remove_insertion(tickets[i]);
+        expected.erase_one(pts[i]);
+        ++submitted;
+      }
+      std::vector<pdt::CellHandle> to_visit;
+      {
+        std::lock_guard<std::mutex> hold(seen_mutex);
+        to_visit.swap(seen);
+      }
+      for (const pdt::CellHandle& h : to_visit) {  // beside the removals
+        e.visit(h, [&](const pdt::CellView&) {
+          arena.execute([&] { tbb::parallel_for(0, 4, [&](int) { visited.fetch_add(1); }); });
+        }, {});
+        ++submitted;
+      }
+      e.drain();
+    }
+    REQUIRE(e.stats().total().completed == submitted);
+    REQUIRE(e.stats().client_errors == 0);
+  });
+  finished.store(true);
+  watchdog.join();
+  CHECK(judged.load() > 0);
+  CHECK(called.load() == 3 * 4 * per_round);
+  CHECK(visited.load() > 0);
+  require_canonical(t, expected);
 }
 
 TEST_CASE("contract: submitting from a parallel_for that throws does not cancel the engine", "[engine][contract][tsan]") {

@@ -96,7 +96,8 @@ struct Changes {
 // cell is as reported, and stays so until the hook returns. Under an engine it
 // runs on a worker while other workers go on elsewhere, so keep it short and
 // thread-safe; it may submit further operations (they run later), but must not
-// wait for any. An exception it throws does not undo the operation: the
+// wait for any. It may run and wait for TBB work of its own (a parallel_for
+// over the cells), also in the engine's arena (engine.hpp). An exception it throws does not undo the operation: the
 // engine keeps the first one and drain() rethrows it; the sequential
 // Triangulation lets it propagate from insert/remove (the operation is done).
 using ChangeHook = std::function<void(const Changes&)>;

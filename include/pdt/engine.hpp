@@ -60,7 +60,10 @@
 //    Parallel work a callback starts and waits for (a tbb::parallel_for,
 //    a task_group) counts as the callback: drain() in it is refused where it
 //    runs on the callback's own thread, and hangs where another thread runs
-//    it, since the callback then waits for that drain().
+//    it, since the callback then waits for that drain(). Such work may run
+//    in the engine's own arena (task_arena::execute from a hook, a visitor
+//    or a callback): a thread waiting for it inside an operation never takes
+//    the engine's tasks, which other threads run instead.
 #include <coroutine>
 #include <cstdint>
 #include <exception>

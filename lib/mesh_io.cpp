@@ -68,7 +68,7 @@ void refuse_unwritable(const Mesh& mesh, const char* who) {
 
 // A field name as an XML attribute value: & < > " ' escaped, and tab,
 // newline and carriage return as character references (a parser turns them
-// into spaces otherwise), so that a name refuse_unreadable_name accepts gives
+// into spaces otherwise), so that a name refuse_unreadable_names accepts gives
 // a file XML parsers (ParaView's) read, and reads back as given.
 std::string xml_attribute(const std::string& s) {
   std::string out;

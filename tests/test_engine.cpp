@@ -1299,13 +1299,12 @@ TEST_CASE("engine: EngineOptions::from_environment reads the PDT_* variables", "
     REQUIRE(plain.workers == 0);
   }
   SECTION("set to the empty string: as unset") {
-    ::setenv("PDT_WORKERS", "", 1);
-    ::setenv("PDT_CONTENTION_LOW", "", 1);
+    EnvGuard env;
+    env.set("PDT_WORKERS", "");
+    env.set("PDT_CONTENTION_LOW", "");
     pdt::EngineOptions d;
     d.workers = 7;
     const pdt::EngineOptions o = pdt::EngineOptions::from_environment(d);
-    ::unsetenv("PDT_WORKERS");
-    ::unsetenv("PDT_CONTENTION_LOW");
     REQUIRE(o.workers == 7);
     REQUIRE(o.contention_low == 0.7);
   }

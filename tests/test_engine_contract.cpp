@@ -608,15 +608,22 @@ TEST_CASE("contract: hooks, callbacks and visitors may wait for TBB algorithms o
   // escalated (escalate_after = 4 here) and waited for it to end: a deadlock,
   // in about half the rounds of this size before
   // EngineState::ops_on_this_thread. A watchdog turns one into a failure that
-  // says so.
-  std::atomic<bool> finished{false};
-  std::thread watchdog([&] {
-    for (int i = 0; i < 900 && !finished.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-    if (!finished.load()) {
-      std::fprintf(stderr, "client code waiting for TBB work in the engine's arena: no progress in 90 s (deadlock)\n");
-      std::_Exit(3);
+  // says so (Watchdog does not: a deadlock makes no attempts, which it reads
+  // as idle); it stops at the end of the test, also when a REQUIRE throws.
+  struct DeadlockWatch {
+    std::atomic<bool> finished{false};
+    std::thread thread{[this] {
+      for (int i = 0; i < 900 && !finished.load(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      if (!finished.load()) {
+        std::fprintf(stderr, "client code waiting for TBB work in the engine's arena: no progress in 90 s (deadlock)\n");
+        std::_Exit(3);
+      }
+    }};
+    ~DeadlockWatch() {
+      finished.store(true);
+      thread.join();
     }
-  });
+  } watch;
   pdt::Triangulation t;
   Expected expected;
   tbb::global_control threads(tbb::global_control::max_allowed_parallelism, 8);  // 8 threads, even on 2 cores
@@ -673,8 +680,6 @@ TEST_CASE("contract: hooks, callbacks and visitors may wait for TBB algorithms o
     REQUIRE(e.stats().total().completed == submitted);
     REQUIRE(e.stats().client_errors == 0);
   });
-  finished.store(true);
-  watchdog.join();
   CHECK(judged.load() > 0);
   CHECK(called.load() == 3 * 4 * per_round);
   CHECK(visited.load() > 0);

@@ -608,8 +608,9 @@ TEST_CASE("contract: hooks, callbacks and visitors may wait for TBB algorithms o
   // escalated (escalate_after = 4 here) and waited for it to end: a deadlock,
   // in about half the rounds of this size before
   // EngineState::ops_on_this_thread. A watchdog turns one into a failure that
-  // says so (Watchdog does not: a deadlock makes no attempts, which it reads
-  // as idle); it stops at the end of the test, also when a REQUIRE throws.
+  // says so; it covers the whole test (the engine's construction and
+  // destruction too, which Watchdog, given an engine, cannot) and stops at
+  // its end, also when a REQUIRE throws.
   struct DeadlockWatch {
     std::atomic<bool> finished{false};
     std::thread thread{[this] {

@@ -4,6 +4,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -143,6 +144,10 @@ bool Args::option(const char* name, bool takes_value) {
   const std::string& a = a_[i_];
   const std::size_t n = std::strlen(name);
   if (a.compare(0, n, name) != 0) return false;
+  if (a.size() != n && a[n] != '=') return false;
+  if (std::find(seen_.begin(), seen_.end(), name) != seen_.end())
+    usage_error(usage_, std::string("option ") + name + " is given twice: give it once");
+  seen_.emplace_back(name);
   if (a.size() == n) {
     ++i_;
     if (takes_value) {
@@ -155,7 +160,6 @@ bool Args::option(const char* name, bool takes_value) {
     }
     return true;
   }
-  if (a[n] != '=') return false;
   if (!takes_value) usage_error(usage_, std::string("option ") + name + " takes no value");
   value_ = a.substr(n + 1);
   ++i_;

@@ -29,7 +29,9 @@ class Args {
   const std::string& peek() const { return a_[i_]; }
   std::string next() { return a_[i_++]; }
   // If the current argument is option `name`, consumes it and returns true;
-  // the value (for options that take one) is then in value().
+  // the value (for options that take one) is then in value(). An option given
+  // a second time is a usage error ("--size 0.3 --size 0.2": which one was
+  // meant is not ours to guess).
   bool option(const char* name, bool takes_value);
   const std::string& value() const { return value_; }
   const char* usage() const { return usage_; }
@@ -39,6 +41,7 @@ class Args {
   std::size_t i_ = 0;
   std::string value_;
   const char* usage_;
+  std::vector<std::string> seen_;  // the options consumed so far, each once
 };
 
 // A non-negative integer option value: "1000000", or "1e6" when integral, at

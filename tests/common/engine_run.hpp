@@ -80,11 +80,14 @@ struct ErrorSink {
   }
 };
 
-// Livelock detector: while alive, polls the engine's statistics; if workers
-// keep attempting operations but none completes for `limit` seconds (a lock
-// that is never released makes every operation touching it roll back
-// forever), prints the statistics and aborts, so the run fails with a
-// diagnosis instead of hanging until an outer timeout.
+// Livelock and deadlock detector: while alive, polls the engine's statistics;
+// if operations are pending (in_flight() > 0) but none completes for `limit`
+// seconds, prints the statistics and aborts, so the run fails with a
+// diagnosis instead of hanging until an outer timeout. Workers that keep
+// attempting are a livelock (a lock that is never released makes every
+// operation touching it roll back forever); workers that attempt nothing
+// while work is pending are a deadlock (a worker waiting for one that never
+// runs). No pending operation is idle, however long.
 class Watchdog {
  public:
   Watchdog(const pdt::Engine& e, std::string label) : engine_(e), label_(std::move(label)), thread_([this] { run(); }) {}
@@ -100,25 +103,30 @@ class Watchdog {
  private:
   void run() {
     const double limit = kTsan ? 300 : 60;
-    std::uint64_t completed = 0, attempts = 0;
+    std::uint64_t completed = 0, attempts_then = 0;
     auto last_progress = std::chrono::steady_clock::now();
     std::unique_lock lock(mutex_);
     while (!cv_.wait_for(lock, std::chrono::milliseconds(500), [this] { return stop_; })) {
+      const std::uint64_t pending = engine_.in_flight();
       const pdt::WorkerStats t = engine_.stats().total();
       const auto now = std::chrono::steady_clock::now();
-      if (t.completed != completed || t.attempts == attempts) last_progress = now;  // progress, or idle
+      if (t.completed != completed || pending == 0) {  // progress, or idle
+        last_progress = now;
+        attempts_then = t.attempts;
+      }
+      completed = t.completed;
       if (std::chrono::duration<double>(now - last_progress).count() > limit) {
+        const std::uint64_t attempts = t.attempts - attempts_then;
         std::fprintf(stderr,
-                     "\n[engine watchdog] %s: livelock: %llu attempts but no operation completed for %.0f s "
+                     "\n[engine watchdog] %s: %s: %llu operations pending, %llu attempts, none completed for %.0f s "
                      "(completed %llu, rollbacks %llu, deferred %llu, sleeps %llu); aborting\n",
-                     label_.c_str(), static_cast<unsigned long long>(t.attempts - attempts), limit,
-                     static_cast<unsigned long long>(t.completed), static_cast<unsigned long long>(t.rollbacks),
-                     static_cast<unsigned long long>(t.deferred), static_cast<unsigned long long>(t.sleeps));
+                     label_.c_str(), attempts == 0 ? "deadlock" : "livelock", static_cast<unsigned long long>(pending),
+                     static_cast<unsigned long long>(attempts), limit, static_cast<unsigned long long>(t.completed),
+                     static_cast<unsigned long long>(t.rollbacks), static_cast<unsigned long long>(t.deferred),
+                     static_cast<unsigned long long>(t.sleeps));
         std::fflush(stderr);
         std::abort();
       }
-      if (t.completed != completed || t.attempts == attempts) attempts = t.attempts;
-      completed = t.completed;
     }
   }
   const pdt::Engine& engine_;

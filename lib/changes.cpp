@@ -10,7 +10,7 @@ using detail::OpContext;
 
 CellHandle Triangulation::Impl::handle_of(CellId c) const {
   const VertexId* v = cells[c].v;
-  return {c, incarnation(c), v[0] != 0 ? v[0] : v[1]};
+  return {c, incarnation(c), v[0] != 0 ? v[0] : v[1], mesh_id};
 }
 
 void Triangulation::Impl::fill_view(CellId c, CellView& out) const {

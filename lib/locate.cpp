@@ -261,6 +261,7 @@ OpStatus Triangulation::Impl::nearest_vertex(OpContext& ctx, const KPoint& q, Ve
 OpStatus Triangulation::Impl::hold_cell(OpContext& ctx, CellHandle h, bool* alive) const {
   Impl& self = *const_cast<Impl*>(this);
   *alive = false;
+  if (h.mesh != mesh_id) return OpStatus::done;  // another triangulation's (or another life of this object's)
   if (h.anchor == 0 || h.anchor >= verts.size() || h.id >= cells.size()) return OpStatus::done;
   if (!self.lock_shared(ctx, h.anchor)) {
     self.release_all(ctx);

@@ -142,8 +142,18 @@ OpContext::~OpContext() = default;
 
 }  // namespace detail
 
+namespace {
+std::uint32_t new_mesh_id() {
+  static std::atomic<std::uint32_t> next{1};
+  std::uint32_t id = next.fetch_add(1, std::memory_order_relaxed);
+  while (id == 0) id = next.fetch_add(1, std::memory_order_relaxed);  // wrapped: 0 is no mesh
+  return id;
+}
+}  // namespace
+
 Triangulation::Impl::Impl(bool small_triangulation)
-    : cells(small_triangulation ? max_small_cells : max_cells, !small_triangulation),
+    : mesh_id(new_mesh_id()),
+      cells(small_triangulation ? max_small_cells : max_cells, !small_triangulation),
       tags(small_triangulation ? max_small_cells : max_cells, !small_triangulation),
       verts(small_triangulation ? max_small_vertices : max_vertices, !small_triangulation),
       is_small(small_triangulation),

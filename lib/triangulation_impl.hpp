@@ -117,6 +117,10 @@ struct Triangulation::Impl {
   explicit Impl(bool is_small = false);
   ~Impl();
 
+  // This storage's number (CellHandle::mesh): from a process-wide counter,
+  // never 0; moves with the storage, kept by clear().
+  const std::uint32_t mesh_id;
+
   // -- storage ---------------------------------------------------------------
   detail::StableArray<CellRec> cells;
   detail::StableArray<std::atomic<std::uint32_t>> tags;

@@ -386,14 +386,15 @@ TEST_CASE("contract: a cell handle names its cell only while it lives, through i
     while (!t.is_vertex(other) || other == t.cell_vertex(c, 0) || other == t.cell_vertex(c, 1) ||
            other == t.cell_vertex(c, 2) || other == t.cell_vertex(c, 3))
       ++other;
-    forged.push_back({h.id, h.incarnation, other});
+    forged.push_back({h.id, h.incarnation, other, h.mesh});
     corner.push_back(t.point(t.cell_vertex(c, 0)));
   }
   REQUIRE(live.size() > 1000);
   for (const pdt::CellHandle& h : live) {
     REQUIRE(t.cell(h).has_value());
-    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, 0, h.anchor}).has_value());
-    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, h.incarnation + 1, h.anchor}).has_value());
+    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, 0, h.anchor, h.mesh}).has_value());
+    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, h.incarnation + 1, h.anchor, h.mesh}).has_value());
+    REQUIRE_FALSE(t.cell(pdt::CellHandle{h.id, h.incarnation, h.anchor}).has_value());  // no mesh
   }
   for (const pdt::CellHandle& h : forged) REQUIRE_FALSE(t.cell(h).has_value());
   // The engine says the same, while it inserts elsewhere.
@@ -449,6 +450,70 @@ TEST_CASE("contract: a cell handle names its cell only while it lives, through i
   }
   CHECK(anchors_back > 100);  // the anchors of the first 200 points
   REQUIRE(t.validate());
+}
+
+TEST_CASE("contract: a cell handle names its triangulation: dead in another, and once the object is assigned anew",
+          "[engine][contract][handles]") {
+  // Cell incarnations are counted per id and triangulation, so two
+  // triangulations built alike hand out handles with the same id,
+  // incarnation and anchor for different cells; CellHandle::mesh tells them
+  // apart. Handles follow the storage when it moves.
+  const std::vector<Point3> a_pts = random_points(300, 51), b_pts = random_points(300, 52);
+  auto handles_of = [](const pdt::Triangulation& t) {
+    std::vector<pdt::CellHandle> hs;
+    for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c)
+      if (t.is_finite_cell(c)) hs.push_back(t.cell_handle(c));
+    return hs;
+  };
+  auto alive_in = [](const pdt::Triangulation& t, const std::vector<pdt::CellHandle>& hs) {
+    std::size_t n = 0;
+    for (const pdt::CellHandle& h : hs) n += t.cell(h).has_value();
+    return n;
+  };
+  pdt::Triangulation a, b;
+  for (const Point3& p : a_pts) (void)a.insert(p);
+  for (const Point3& p : b_pts) (void)b.insert(p);
+  const std::vector<pdt::CellHandle> ha = handles_of(a), hb = handles_of(b);
+  REQUIRE(ha.size() > 1000);
+  CHECK(ha.front().mesh != 0);
+  CHECK(ha.front().mesh != hb.front().mesh);
+  // Same id, incarnation and anchor in both, for a different tetrahedron.
+  std::size_t alike = 0;
+  for (const pdt::CellHandle& h : ha)
+    alike += b.is_finite_cell(h.id) && b.cell_handle(h.id).incarnation == h.incarnation &&
+             b.cell_handle(h.id).anchor == h.anchor;
+  CHECK(alike > 0);
+  CHECK(alive_in(a, ha) == ha.size());
+  CHECK(alive_in(b, ha) == 0);
+  CHECK(alive_in(a, hb) == 0);
+  // Inserting at a vertex of a's cell only if it is alive, in b: nothing.
+  for (std::size_t i = 0; i < 50; ++i) {
+    const pdt::InsertResult r = b.insert_if_alive(a.point(a.cell_vertex(ha[i].id, 0)), ha[i]);
+    CHECK(r.vertex == pdt::no_vertex);
+  }
+  CHECK(b.number_of_vertices() == b_pts.size());
+  // The engine agrees.
+  std::atomic<int> alive{0}, dead{0};
+  {
+    pdt::Engine e(b, kUnit, options_with(2));
+    for (std::size_t i = 0; i < 200; ++i)
+      e.visit(ha[i], [](const pdt::CellView&) {}, [&](const pdt::OpResult& r) { (r.alive ? alive : dead).fetch_add(1); });
+    e.drain();
+  }
+  CHECK(alive.load() == 0);
+  CHECK(dead.load() == 200);
+  // Moves carry the handles with the cells; the object left behind is new.
+  pdt::Triangulation c = std::move(a);
+  CHECK(alive_in(c, ha) == ha.size());
+  CHECK(alive_in(a, ha) == 0);
+  b = std::move(c);
+  CHECK(alive_in(b, ha) == ha.size());
+  CHECK(alive_in(b, hb) == 0);  // b's earlier cells are gone
+  b = pdt::Triangulation();
+  for (const Point3& p : a_pts) (void)b.insert(p);  // the same cells again, in new storage
+  CHECK(alive_in(b, ha) == 0);
+  CHECK(handles_of(b).size() == ha.size());
+  require_valid(b);
 }
 
 // =============================================================================

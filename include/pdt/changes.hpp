@@ -11,8 +11,10 @@
 // dead) and never read as the cell that replaced it. A vertex incarnation is
 // unique in the whole process, so a VertexHandle of one triangulation reads
 // as dead in any other (and after `t = Triangulation()`). A cell
-// incarnation is counted per id and triangulation: use a CellHandle only
-// with the triangulation that made it; clear() keeps the counts, so its
+// incarnation is counted per id and triangulation, so a CellHandle also names
+// its triangulation's storage (CellHandle::mesh): it reads as dead in any
+// other triangulation, and after `t = Triangulation()` or `t = std::move(u)`
+// (where u's handles now name t's cells); clear() keeps the counts, so its
 // handles from before read as dead there.
 //
 // Keeping data per cell or vertex. Key it by id, and store the incarnation
@@ -61,11 +63,17 @@ struct VertexHandle {
 };
 
 // A cell incarnation. anchor is one of its finite vertices: holding it pins
-// the cell's neighbourhood, which is how the engine reads a cell later.
+// the cell's neighbourhood, which is how the engine reads a cell later. mesh
+// numbers the storage the cell lives in: a number unique in the process (but
+// for wrapping after 2^32 - 1 triangulations), given to each triangulation's
+// storage when it is made (a Triangulation constructed, or the empty one
+// that a moved-from object is left with), moved with it, kept by clear();
+// never 0, so a default or hand-made handle without it reads as dead.
 struct CellHandle {
   CellId id = no_cell;
   std::uint32_t incarnation = 0;
   VertexId anchor = no_vertex;
+  std::uint32_t mesh = 0;
   friend bool operator==(const CellHandle&, const CellHandle&) = default;
 };
 

@@ -36,6 +36,10 @@ void Triangulation::Impl::begin_report(OpContext& ctx, std::size_t cells_made, s
 void Triangulation::Impl::end_report(OpContext& ctx, OpKind kind, VertexId v, std::uint64_t incarnation) {
   if (!ctx.recording) return;
   ctx.recording = false;
+  // A sequential hook may query its triangulation, whose change is complete
+  // now: its counts must say so too (an engine's hook may not: other
+  // operations run meanwhile, and workers fold their counts later).
+  if (!ctx.locking) fold_counters(ctx);
   ctx.views.resize(ctx.created.size());
   for (std::size_t i = 0; i < ctx.created.size(); ++i) fill_view(ctx.created[i], ctx.views[i]);
   Changes changes;

@@ -1326,6 +1326,34 @@ TEST_CASE("a change hook that throws: the operation is done and the counts stay 
   REQUIRE(t.dimension() == -1);
 }
 
+TEST_CASE("a sequential change hook's queries see the change complete, counts included, in every dimension",
+          "[insert][remove][hook]") {
+  // The hook runs inside the operation but after the change is made: every
+  // const query, validate() included, agrees with what it reports.
+  pdt::Triangulation t;
+  std::size_t reports = 0;
+  std::vector<std::string> wrong;
+  t.set_change_hook([&](const pdt::Changes& c) {
+    ++reports;
+    std::string why;
+    if (!t.validate(&why)) wrong.push_back("validate: " + why);
+    if (t.number_of_vertices() != t.vertices().size()) wrong.push_back("vertex count");
+    if (t.number_of_finite_cells() != t.finite_cells().size()) wrong.push_back("finite cell count");
+    for (const pdt::CellView& v : c.created)
+      if (!t.cell(v.handle)) wrong.push_back("a created cell reads dead");
+    if (c.kind == pdt::OpKind::insert && !t.is_vertex(c.vertex)) wrong.push_back("the inserted vertex is not live");
+    if (c.kind == pdt::OpKind::remove && t.is_vertex(c.vertex)) wrong.push_back("the removed vertex is live");
+  });
+  // Through dimensions 0..3 one point at a time, a batch, then back to empty.
+  const std::vector<Point3> first{{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}};
+  for (const Point3& p : first) (void)t.insert(p);
+  (void)t.insert_batch(random_points(200, 61));
+  while (t.number_of_vertices() > 0) (void)t.remove(t.vertices().back());
+  CHECK(reports > 400);
+  CHECK(wrong.empty());
+  if (!wrong.empty()) FAIL_CHECK(wrong.front());
+}
+
 TEST_CASE("a change hook may not change its own triangulation: refused, naming the rule", "[insert][remove][hook]") {
   // The hook reports a change still being made: inserting, removing,
   // clearing, replacing the hook (the running std::function) or moving the

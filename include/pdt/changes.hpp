@@ -108,6 +108,12 @@ struct Changes {
 // over the cells), also in the engine's arena (engine.hpp). An exception it throws does not undo the operation: the
 // engine keeps the first one and drain() rethrows it; the sequential
 // Triangulation lets it propagate from insert/remove (the operation is done).
+// A sequential triangulation's hook sees the change complete: its const
+// queries (counts, cell(h), validate()) agree with the report. It may not
+// change that triangulation (insert, remove, clear, set_change_hook, a move:
+// pdt::Error), nor destroy it (the process stops, naming the rule). Under an
+// engine, the triangulation's const queries are for quiescent times only
+// (triangulation.hpp); from a hook, read cells through the report.
 using ChangeHook = std::function<void(const Changes&)>;
 
 }  // namespace pdt

@@ -114,7 +114,8 @@ class Triangulation {
   Triangulation();
   // Destroying a triangulation while an engine is attached to it breaks the
   // rule that it outlives its engine: the process stops (std::abort) with a
-  // message naming the rule, instead of corrupting memory later.
+  // message naming the rule, instead of corrupting memory later. So does
+  // destroying it from its own change hook (the change is still being made).
   ~Triangulation();
   // Moving is refused (pdt::Error) while an engine is attached to either side.
   Triangulation(Triangulation&&);

@@ -329,9 +329,8 @@ OpStream generate(const GenerateOptions& o) {
   if (!(o.remove_fraction >= 0 && o.remove_fraction <= 1))
     throw Error(ErrorCode::invalid_argument,
                 "generate: remove_fraction is " + std::to_string(o.remove_fraction) + "; expected a number in [0, 1]");
-  // Vertex ids are 32-bit; the grid indexes its lattice with 32-bit integers
-  // too (this cap is below 1625^3, so k <= 1625 and k^3 < 2^32).
-  constexpr std::uint64_t kMaxPoints = (std::uint64_t{1} << 32) - (std::uint64_t{1} << 23);
+  constexpr std::uint64_t kMaxPoints = GenerateOptions::max_points;  // below 1625^3
+  static_assert(kMaxPoints <= std::uint64_t{1625} * 1625 * 1625);
   if (o.points > kMaxPoints)
     throw Error(ErrorCode::invalid_argument,
                 "generate: " + std::to_string(o.points) + " points requested; at most " + std::to_string(kMaxPoints));

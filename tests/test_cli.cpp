@@ -113,6 +113,7 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
         {"refine --domain sphere --size 0.5 --out m.node --trace m.ele", "--trace m.ele and --out m.node both write m.ele"},
         {"run m.node --out m.node", "--out m.node would overwrite the input m.node"},
         {"gen --points 1e17 --out x.ops", "--points '1e17': with a decimal point or an exponent at most 2^53"},
+        {"gen --points 1e12 --out x.ops", "--points '1e12': too large (at most 4286578688)"},
         {"run a.ops --threads 4097", "--threads '4097': too large (at most 4096)"},
         {"run a.ops --threads 99999999999999999999999", "--threads '99999999999999999999999': too large (at most 4096)"},
         {"refine --domain sphere --size 0.5 --threads 1e30", "--threads '1e30': too large (at most 4096)"},
@@ -322,6 +323,20 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK(pdt_test::read_file(err).find("cannot write the summary") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(d.file("f.vtu")));
     CHECK_FALSE(std::filesystem::exists(d.file("f.ops")));
+    // A reader that stops after the first line (head -1): the summary up to
+    // the outputs may reach the pipe before it closes, the last lines cannot.
+    // Either the run fails with nothing written, or it says the outputs were.
+    CHECK(status_of("bash -c \"set -o pipefail; " + tool + "refine --domain sphere --size 0.2 --out '" +
+                    d.file("p.vtu") + "' 2>'" + err + "' | head -c 1 >/dev/null\"") == 2);
+    const std::string pipe_err = pdt_test::read_file(err);
+    INFO(pipe_err);
+    if (std::filesystem::exists(d.file("p.vtu")))
+      CHECK(pipe_err.find("the outputs were written before it (" + d.file("p.vtu") + ")") != std::string::npos);
+    else
+      CHECK(pipe_err.find("the output files were not written") != std::string::npos);
+    // gen writes its one summary line after its file: a lost line says so.
+    CHECK(status_of(tool + "gen --points 10 --out '" + d.file("w.ops") + "' >/dev/full 2>'" + err + "'") == 2);
+    CHECK(pdt_test::read_file(err).find("the outputs were written before it") != std::string::npos);
     // The mesh's .ele passes a file-size limit the trace and .node stay
     // under: the run fails, and the older trace is as it was.
     pdt_test::write_file(d.file("s.ops"), "old\n");

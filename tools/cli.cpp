@@ -11,7 +11,9 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <thread>
 
+#include "pdt/engine_options.hpp"
 #include "pdt/error.hpp"
 #include "pdt/io.hpp"
 #include "support/cli_text.hpp"
@@ -166,6 +168,20 @@ bool Args::option(const char* name, bool takes_value) {
   return true;
 }
 
+unsigned parse_workers_option(const Args& args, const std::string& v) {
+  const std::uint64_t n = parse_count_option(args, "--threads", v, pdt::EngineOptions::max_workers);
+  const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+  if (n == 0) return cores;
+  constexpr unsigned max_per_core = 16;
+  if (n > std::uint64_t{max_per_core} * cores)
+    std::fprintf(stderr,
+                 "pdt: note: --threads %llu on %u hardware threads: workers beyond about %u per hardware thread "
+                 "make the run slower, not faster (idle workers search each other's blocks for work); "
+                 "--threads 0 gives one per hardware thread\n",
+                 static_cast<unsigned long long>(n), cores, max_per_core);
+  return static_cast<unsigned>(n);
+}
+
 std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v, std::uint64_t max) {
   auto too_large = [&] {
     usage_error(args.usage(), std::string(name) + " '" + v + "': too large (at most " + std::to_string(max) + ")");
@@ -222,6 +238,15 @@ void require_summary_written() {
                    std::string("cannot write the summary to standard ") + (summary_file == stderr ? "error" : "output") +
                        ": " + std::strerror(err) + "; the output files were not written (older ones stay as they were)");
 }
+
+namespace {
+std::string placed_outputs;
+}
+void outputs_in_place(const std::string& names) {
+  if (!placed_outputs.empty()) placed_outputs += ", ";
+  placed_outputs += names;
+}
+const std::string& outputs_placed() { return placed_outputs; }
 
 bool writes_standard_output(const std::string& path) {
   struct stat out, st;

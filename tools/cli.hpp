@@ -49,6 +49,11 @@ class Args {
 std::uint64_t parse_count_option(const Args& args, const char* name, const std::string& v,
                                  std::uint64_t max = std::numeric_limits<std::uint64_t>::max());
 double parse_real_option(const Args& args, const char* name, const std::string& v);
+// --threads N: the engine's workers, 0 = one per hardware thread. Far more
+// workers than hardware threads (over 16 each) is allowed but slow (an idle
+// worker looks through the other workers' blocks for work, so the cost of
+// finding work grows with the workers): says so on stderr.
+unsigned parse_workers_option(const Args& args, const std::string& v);
 
 // Refuses, before a long run, an output path whose directory is missing or
 // not writable (pdt::Error io_failure naming the option and the path); the
@@ -87,6 +92,10 @@ std::FILE* summary_stream();
 // could not be written (a command calls it before it puts its outputs in
 // place, so that a lost summary fails the run with the files as they were).
 void require_summary_written();
+// The outputs a command has put in place (names, for the message when the
+// summary's last lines, written after them, are lost: `pdt run ... | head -1`).
+void outputs_in_place(const std::string& names);
+const std::string& outputs_placed();
 // One "key   value" line of a command's summary (on summary_stream()).
 void row(const char* key, const std::string& value);
 // The "peak memory" row: the run's own peak (taken before its outputs were

@@ -45,7 +45,7 @@ int cmd_gen(Args args) {
         usage_error(gen_usage, e.what());
       }
     } else if (args.option("--points", true)) {
-      o.points = parse_count_option(args, "--points", args.value());
+      o.points = parse_count_option(args, "--points", args.value(), pdt::GenerateOptions::max_points);
       have_points = true;
     } else if (args.option("--remove-fraction", true)) {
       o.remove_fraction = parse_real_option(args, "--remove-fraction", args.value());
@@ -67,6 +67,7 @@ int cmd_gen(Args args) {
   pdt::support::Stopwatch sw;
   const pdt::OpStream s = pdt::generate(o);
   pdt::write_ops(*out, s);
+  outputs_in_place(*out);
   std::fprintf(summary_stream(), "wrote %s: %s insertions, %s removals (%s, seed %llu), box %s, in %s\n", out->c_str(),
               format_count(s.insert_count()).c_str(), format_count(s.remove_count()).c_str(), pdt::to_string(o.dist),
               static_cast<unsigned long long>(o.seed), box_string(*s.box).c_str(), format_seconds(sw.seconds()).c_str());

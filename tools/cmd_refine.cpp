@@ -100,8 +100,7 @@ int cmd_refine(Args args) {
     } else if (args.option("--ratio", true)) {
       ratio = parse_real_option(args, "--ratio", args.value());
     } else if (args.option("--threads", true)) {
-      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), pdt::EngineOptions::max_workers);
-      workers = n == 0 ? std::max(1u, std::thread::hardware_concurrency()) : static_cast<unsigned>(n);
+      workers = parse_workers_option(args, args.value());
     } else if (args.option("--seed", true)) {
       seed = parse_count_option(args, "--seed", args.value());
     } else if (args.option("--budget", true)) {
@@ -193,17 +192,31 @@ int cmd_refine(Args args) {
                      format_count(st.died_in_engine) + " more while their insertion was queued in the engine, " +
                      format_count(st.protected_skipped) + " left in the protected layer");
   row("time", format_seconds(st.seconds) + per_second(q.inside, st.seconds) + " tets inside");
-  std::snprintf(buf, sizeof buf,
-                "%.3f radius-edge (bound %.4g), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
-                "protected layer along the surface; %s inside too flat for doubles to place their circumcentre)",
-                q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
-                format_count(q.protected_layer).c_str(), format_count(q.unplaced).c_str());
+  if (q.judged > 0)
+    std::snprintf(buf, sizeof buf,
+                  "%.3f radius-edge (bound %.4g), circumradius %.4g (bound %.4g), over %s tets (%s more in the "
+                  "protected layer along the surface; %s inside too flat for doubles to place their circumcentre)",
+                  q.worst_ratio, o.ratio, q.largest_radius, o.size, format_count(q.judged).c_str(),
+                  format_count(q.protected_layer).c_str(), format_count(q.unplaced).c_str());
+  else  // no maximum to give
+    std::snprintf(buf, sizeof buf,
+                  "none judged (%s tets in the protected layer along the surface; %s inside too flat for doubles to "
+                  "place their circumcentre)",
+                  format_count(q.protected_layer).c_str(), format_count(q.unplaced).c_str());
   row("worst inside", buf);
+  // A minimum over no tetrahedron is no angle: said in words, not as 180.
+  const auto degrees = [](std::uint64_t over, double d) {
+    if (over == 0) return std::string("none");
+    char b[32];
+    std::snprintf(b, sizeof b, "%.2f", d);
+    return std::string(b);
+  };
   std::snprintf(buf, sizeof buf,
-                "%.2f degrees smallest inside, %.2f among the judged; %s slivers under %.0f degrees inside (%s "
+                "%s degrees smallest inside, %s among the judged; %s slivers under %.0f degrees inside (%s "
                 "judged): the radius-edge bound does not exclude slivers",
-                q.min_dihedral, q.min_dihedral_judged, format_count(q.slivers).c_str(),
-                pdt_refine::MeshQuality::sliver_degrees, format_count(q.slivers_judged).c_str());
+                degrees(q.inside, q.min_dihedral).c_str(), degrees(q.judged, q.min_dihedral_judged).c_str(),
+                format_count(q.slivers).c_str(), pdt_refine::MeshQuality::sliver_degrees,
+                format_count(q.slivers_judged).c_str());
   row("dihedral", buf);
   int status = 0;
   // "was hit", or, when the budget stopped a step of several points before
@@ -253,9 +266,12 @@ int cmd_refine(Args args) {
     }
   }
   if (trace_writer) trace_writer->close();
+  if (trace) outputs_in_place(*trace);
   if (out) {
     const pdt::TetgenFiles files = pdt::tetgen_files(*out);
-    row("wrote", ends_with_nocase(*out, ".vtu") ? *out : files.node + " and " + files.ele);
+    const std::string written = ends_with_nocase(*out, ".vtu") ? *out : files.node + " and " + files.ele;
+    outputs_in_place(written);
+    row("wrote", written);
   }
   if (trace)
     row("trace", writes_standard_output(*trace) ? *trace : *trace + " (pdt run " + *trace + " --threads N replays it)");

@@ -373,8 +373,7 @@ int cmd_run(Args args) {
       return 0;
     }
     if (args.option("--threads", true)) {
-      const std::uint64_t n = parse_count_option(args, "--threads", args.value(), pdt::EngineOptions::max_workers);
-      workers = n == 0 ? std::max(1u, std::thread::hardware_concurrency()) : static_cast<unsigned>(n);
+      workers = parse_workers_option(args, args.value());
     } else if (args.option("--in-flight", true)) {
       in_flight = parse_count_option(args, "--in-flight", args.value());
       if (in_flight < 2) usage_error(run_usage, "--in-flight " + args.value() + ": expected at least 2");
@@ -500,6 +499,7 @@ int cmd_run(Args args) {
       const pdt::TetgenFiles files = pdt::tetgen_files(*out);
       written = files.node + " and " + files.ele;
     }
+    outputs_in_place(written);
     row("wrote", written + " (" + format_count(m.points.size()) + " points, " + format_count(m.tets.size()) + " tets)");
   }
   peak_memory_row(peak, out_kind != OutKind::none ? " with writing the mesh (a copy of it)" : nullptr);

@@ -119,7 +119,14 @@ int main(int argc, char** argv) {
     const int status = dispatch(argc, argv);
     // A summary lost to a full disk or a closed pipe is a failure too.
     if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
-      std::fprintf(stderr, "pdt: cannot write to standard output: %s\n", std::strerror(errno));
+      const int err = errno != 0 ? errno : EIO;
+      if (outputs_placed().empty())
+        std::fprintf(stderr, "pdt: cannot write to standard output: %s\n", std::strerror(err));
+      else  // the summary up to the outputs was written (require_summary_written), then the rest was lost
+        std::fprintf(stderr,
+                     "pdt: cannot write the end of the summary to standard output: %s; the outputs were written "
+                     "before it (%s)\n",
+                     std::strerror(err), outputs_placed().c_str());
       return 2;
     }
     return status;

@@ -38,6 +38,9 @@ enum class RemovalOrder {
 };
 
 struct GenerateOptions {
+  // The most points generate() makes: vertex ids are 32-bit, and the grid
+  // indexes its lattice with 32-bit integers (k <= 1625, k^3 < 2^32).
+  static constexpr std::uint64_t max_points = (std::uint64_t{1} << 32) - (std::uint64_t{1} << 23);
   Distribution dist = Distribution::uniform;
   std::uint64_t points = 1000;
   double remove_fraction = 0;  // in [0, 1]

@@ -2,7 +2,10 @@
 #pragma once
 // Every failure pdt reports is a pdt::Error. The operation that throws it has
 // changed nothing: the triangulation (or engine, or file) is as it was before
-// the call. what() says what was wrong and what to do about it.
+// the call. what() says what was wrong and what to do about it. One exception:
+// what a change hook throws (a pdt::Error its own refused call raised, say)
+// leaves a sequential insert or remove after the change is made, which stays
+// (changes.hpp).
 #include <stdexcept>
 #include <string>
 

@@ -163,6 +163,12 @@ need c++ g++ command -v c++
 need python3 python3 command -v python3
 need pkg-config pkg-config command -v pkg-config
 need patchelf patchelf command -v patchelf
+if [ -z "${VCPKG_ROOT:-}" ] && [ ! -x "$REPO/build-vcpkg/vcpkg-offline/vcpkg/vcpkg" ]; then
+  # vcpkg will be built from the vendored sources: its prerequisites too, in the same list.
+  need "libcurl's headers" libcurl4-openssl-dev pkg-config --exists libcurl
+  need zip zip command -v zip
+  need unzip unzip command -v unzip
+fi
 abort_if_missing
 if [ -n "${VCPKG_ROOT:-}" ]; then
   VCPKG_ROOT=$(cd "$VCPKG_ROOT" 2>/dev/null && pwd) || abort "VCPKG_ROOT=$VCPKG_ROOT: no such directory"

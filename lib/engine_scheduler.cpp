@@ -269,6 +269,16 @@ Block* EngineState::claim(Worker& w) {
   // visiting only the blocks marked non-empty. Blocks whose home is not
   // running (asleep, idle, waiting) before busy homes' blocks.
   auto steal = [&](bool orphans_only) -> Block* {
+    // Orphans (work whose home is not running) sit in sleepers' blocks (an
+    // idle home is resumed by the submission that fills its block). With no
+    // sleeper, skip the scan: it would look at every non-empty block only to
+    // find each home running (with far more workers than threads, most of
+    // the run's time). A sleeper that falls asleep meanwhile is found by the
+    // next claim's look.
+    if (orphans_only && static_cast<std::size_t>(active.load(std::memory_order_relaxed)) +
+                                static_cast<std::size_t>(idle_count.load(std::memory_order_relaxed)) >=
+                            workers.size())
+      return nullptr;
     std::int64_t below = nonempty.prev(std::int64_t{first} - 1);
     std::uint32_t above = nonempty.next(end, count);
     while (below >= 0 || above < count) {

@@ -157,7 +157,16 @@ struct OpReader::State {
         box_line = f.line();
         continue;
       }
-      f.fail("unknown verb " + detail::quote(verb) + "; " + kExpectedForms);
+      {
+        // A number where a verb goes: most likely a point file (x y z per
+        // line) under a name that does not say so.
+        double x = 0;
+        const bool number = detail::parse_double(verb, x) == detail::NumStatus::ok;
+        f.fail("unknown verb " + detail::quote(verb) + "; " + kExpectedForms +
+               (number ? " (a file of points, x y z per line, is read as one by its extension: .xyz, .xyz.gz, .ply, "
+                         ".off, .node, .smesh)"
+                       : ""));
+      }
     }
     return false;
   }

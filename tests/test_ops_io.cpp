@@ -176,6 +176,10 @@ TEST_CASE("ops text accepts comments, blank lines, CRLF, '+' signs and exponents
 TEST_CASE("malformed text streams are rejected with file and line", "[io]") {
   SECTION("unknown verb") { expect_bad("i 1 2 3\nx 1 2 3\n", 2, "unknown verb 'x'"); }
   SECTION("verbs are case-sensitive") { expect_bad("I 1 2 3\n", 1, "unknown verb 'I'"); }
+  SECTION("a point file under a stream's name") {
+    expect_bad("0.1 0.2 0.3\n0.4 0.5 0.6\n", 1, "unknown verb '0.1'");
+    expect_bad("0.1 0.2 0.3\n", 1, "is read as one by its extension: .xyz");
+  }
   SECTION("missing coordinate") { expect_bad("i 1 2\n", 1, "expected 'i x y z'"); }
   SECTION("extra coordinate") { expect_bad("i 0 0 0\ni 1 2 3 4\n", 2, "expected 'i x y z'"); }
   SECTION("NaN") { expect_bad("i 0 0 0\ni nan 0 0\n", 2, "not finite"); }

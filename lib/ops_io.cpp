@@ -237,6 +237,14 @@ OpReader::OpReader(const std::string& path) : state_(std::make_unique<State>(pat
     if (head.substr(0, 6) == std::string_view(kMagic, 6))
       throw Error(ErrorCode::bad_format, st.f.path() + ": a binary operation stream of another version (magic " +
                                              detail::quote(head) + "); this pdt reads version 1 (magic 'PDTOPS1\\x00')");
+    // The content decides, but a file named as binary must be binary: an empty or cut
+    // .opsb (a copy that failed, a download cut short) is no empty text stream.
+    if (detail::ends_with_nocase(path, ".opsb") || detail::ends_with_nocase(path, ".opsb.gz"))
+      throw Error(ErrorCode::bad_format,
+                  st.f.path() + ": not a binary operation stream: a .opsb file starts with the magic 'PDTOPS1\\x00', " +
+                      (head.empty() ? std::string("and this one is empty")
+                                    : "and this one starts with " + detail::quote(head)) +
+                      "; a text stream goes under another name (.ops)");
     st.f.skip_utf8_bom();
     // The box, if any, comes before the first operation: read up to it.
     Operation first;

@@ -135,6 +135,32 @@ TEST_CASE("ops format is chosen by content, not by name", "[io]") {
   require_same(s, pdt::read_ops(d.file("a.ops")));
 }
 
+TEST_CASE("ops: a file named .opsb must be binary, an empty one included", "[io]") {
+  TempDir d;
+  pdt::write_ops(d.file("a.opsb"), tricky_stream());
+  const std::string bytes = pdt_test::read_file(d.file("a.opsb"));
+  const std::pair<std::string, std::string> cases[] = {
+      {"", "and this one is empty"},
+      {bytes.substr(0, 5), "starts with 'PDTOP'"},
+      {"i 1 2 3\n", "starts with 'i 1 2 3"},
+  };
+  for (const auto& [content, what] : cases) {
+    for (const char* name : {"b.opsb", "b.OPSB"}) {
+      write_file(d.file(name), content);
+      auto e = catch_error([&] { pdt::read_ops(d.file(name)); });
+      REQUIRE(e);
+      INFO(e->what());
+      CHECK(e->code() == pdt::ErrorCode::bad_format);
+      CHECK(std::string(e->what()).find(d.file(name) + ": not a binary operation stream") == 0);
+      CHECK(std::string(e->what()).find(what) != std::string::npos);
+      std::filesystem::remove(d.file(name));
+    }
+  }
+  // Under a text name the same text reads as text.
+  write_file(d.file("b.ops"), "i 1 2 3\n");
+  CHECK(pdt::read_ops(d.file("b.ops")).ops.size() == 1);
+}
+
 TEST_CASE("ops without a box, empty streams, counts", "[io]") {
   TempDir d;
   pdt::OpStream s;

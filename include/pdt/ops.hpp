@@ -66,8 +66,9 @@ class OpReader {
   std::unique_ptr<State> state_;
 };
 
-// Reads a stream; the format is chosen by content (binary magic) not by name
-// (either form may also be gzip-compressed: one member or several back to
+// Reads a stream; the format is chosen by content (binary magic) not by name,
+// except that a file named *.opsb (or *.opsb.gz) without the magic, an empty
+// one included, is bad_format (either form may also be gzip-compressed: one member or several back to
 // back; a truncated or damaged member, or other bytes after the gzip data,
 // are bad_format). Throws pdt::Error(bad_format)
 // naming file and line (binary: operation index) for a malformed stream:

@@ -317,6 +317,15 @@ bool InputFile::fill() {
   return true;
 }
 
+// A CR that does not end its line: a file whose lines end in CR alone (classic
+// Mac OS) reads as one long line, whose fields a reader that ignores extra
+// columns (.xyz) would take for one point.
+void InputFile::refuse_bare_cr(std::string_view line) const {
+  if (std::memchr(line.data(), '\r', line.size()) != nullptr)
+    fail("a carriage return (\\r) inside the line: pdt reads lines that end in LF or CR LF, and this "
+         "file seems to end them in CR alone (classic Mac OS); convert it first, e.g. tr '\\r' '\\n'");
+}
+
 bool InputFile::read_line(std::string_view& line) {
   auto too_long = [&] {
     ++line_;
@@ -335,6 +344,7 @@ bool InputFile::read_line(std::string_view& line) {
       consumed_ += e + 1 - pos_;
       pos_ = e + 1;
       ++line_;
+      refuse_bare_cr(line);
       return true;
     }
     std::size_t pending = end_ - pos_;
@@ -349,6 +359,7 @@ bool InputFile::read_line(std::string_view& line) {
       consumed_ += end_ - pos_;
       pos_ = end_;
       ++line_;
+      refuse_bare_cr(line);
       return true;
     }
     scanned = pos_ + pending;  // fill() moved the tail to the front
@@ -386,7 +397,15 @@ void InputFile::skip_utf8_bom() {
 void InputFile::fail(const std::string& what) const { fail_at_line(line_, what); }
 
 void InputFile::fail_at_line(std::uint64_t line, const std::string& what) const {
-  throw Error(ErrorCode::bad_format, path_ + ":" + std::to_string(line) + ": " + what);
+  // Line 0: nothing was read (an empty file); the path alone says where.
+  throw Error(ErrorCode::bad_format, path_ + (line == 0 ? std::string() : ":" + std::to_string(line)) + ": " + what);
+}
+
+bool names_no_file(std::string_view path) { return path.empty() || path.back() == '/'; }
+
+void refuse_nameless(const std::string& path, const char* who, const char* example) {
+  throw Error(ErrorCode::invalid_argument, std::string(who) + ": '" + path + "' names no file (give it a name such as " +
+                                               example + "); nothing was written");
 }
 
 // ---- FdWriter ----------------------------------------------------------------

@@ -58,7 +58,8 @@ void append_uint(std::string& out, std::uint64_t v);
 // file) is refused as bad_format, as are a truncated member and corrupt data:
 // what is read is the whole file or an error, never a silent prefix. Any
 // other file is read as it is. Lines end at '\n'; a trailing '\r' is
-// dropped. Line views stay valid until the next read call.
+// dropped, and any other '\r' in a line fails it (lines ended by CR alone).
+// Line views stay valid until the next read call.
 class InputFile {
  public:
   // Throws io_failure ("cannot open 'path': No such file or directory").
@@ -80,12 +81,13 @@ class InputFile {
   const std::string& path() const { return path_; }
   std::uint64_t line() const { return line_; }  // number of the last line read (1-based)
   std::uint64_t offset() const { return consumed_; }  // bytes (uncompressed) consumed
-  // "path:line: " + what, as a bad_format error.
+  // "path:line: " + what, as a bad_format error ("path: " + what before the first line).
   [[noreturn]] void fail(const std::string& what) const;
   [[noreturn]] void fail_at_line(std::uint64_t line, const std::string& what) const;
 
  private:
   bool fill();  // reads more into the buffer; false when nothing more
+  void refuse_bare_cr(std::string_view line) const;  // fails the line if it holds a '\r'
   // Up to n raw (on-disk) bytes into dst; 0 only at the end of the file.
   std::size_t read_raw(char* dst, std::size_t n);
   std::size_t inflate_into(char* dst, std::size_t n);  // gzip: up to n decompressed bytes; 0 at the end
@@ -170,6 +172,12 @@ class OutputFile {
 };
 
 [[noreturn]] void throw_io_error(const std::string& what, const std::string& path, int err);
+
+// A path that names no file: "" or a folder ("out/"). Writers refuse it before
+// writing anything, with refuse_nameless's invalid_argument (who: the function;
+// example: a name to give instead).
+bool names_no_file(std::string_view path);
+[[noreturn]] void refuse_nameless(const std::string& path, const char* who, const char* example);
 
 // Unlinks the temporary files of the OutputFiles alive now (up to 16 at a
 // time are tracked). Async-signal-safe: the pdt tool calls it from its

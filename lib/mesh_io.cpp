@@ -34,16 +34,14 @@ TetgenFiles tetgen_files(const std::string& path) {
 
 namespace {
 
-// A path that names no file, refused before anything is written: "" or a
-// folder ("out/"), and for TetGen's pair a name that is its extension alone
-// (".node": the files would be hidden ".node" and ".ele"). A VTK file named
-// ".vtu" is a (hidden) name like any other.
+// A path that names no file, refused before anything is written (io_util),
+// and for TetGen's pair a name that is its extension alone (".node": the files
+// would be hidden ".node" and ".ele"). A VTK file named ".vtu" is a (hidden)
+// name like any other.
 void refuse_nameless(const std::string& path, const char* who, bool tetgen_pair) {
-  const std::string base = path.substr(path.find_last_of('/') + 1);
-  if (base.empty() || (tetgen_pair && tetgen_files(base).node == ".node"))
-    throw Error(ErrorCode::invalid_argument, std::string(who) + ": '" + path +
-                                                 "' names no file (give it a name such as mesh" +
-                                                 (tetgen_pair ? ".node" : ".vtu") + "); nothing was written");
+  if (detail::names_no_file(path) ||
+      (tetgen_pair && tetgen_files(path.substr(path.find_last_of('/') + 1)).node == ".node"))
+    detail::refuse_nameless(path, who, tetgen_pair ? "mesh.node" : "mesh.vtu");
 }
 
 // What the writers refuse before writing anything: a tetrahedron naming a

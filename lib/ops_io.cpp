@@ -324,9 +324,12 @@ OpStream read_ops(const std::string& path) {
   OpReader reader(path);
   OpStream st;
   st.box = reader.box();
-  // Reserve by what the file could hold at most, never by an announced count
-  // alone: a corrupt count must not trigger a huge allocation.
-  if (reader.announced_count()) st.ops.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(*reader.announced_count(), 1u << 24)));
+  // Reserve by the announced count up to 2^20 operations (40 MiB), and let a
+  // longer stream grow the vector as it proves its length: a corrupt count
+  // must not make a large allocation (under a memory limit, a bad_alloc
+  // instead of the bad_format the data gives).
+  if (reader.announced_count())
+    st.ops.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(*reader.announced_count(), 1u << 20)));
   Operation op;
   while (reader.next(op)) st.ops.push_back(op);
   return st;
@@ -394,6 +397,7 @@ void put_text_op(detail::OutputFile& out, const Operation& op, std::string& line
 }  // namespace
 
 void write_ops(const std::string& path, const OpStream& stream) {
+  if (detail::names_no_file(path)) detail::refuse_nameless(path, "write_ops", "stream.ops");
   validate_for_write(stream);
   detail::OutputFile out(path);
   if (detail::ends_with_nocase(path, ".opsb")) {
@@ -460,6 +464,7 @@ OpWriter::State& OpWriter::state_of(const std::unique_ptr<State>& s) {
 }
 
 OpWriter::OpWriter(const std::string& path, const std::optional<Box>& box) : state_(std::make_unique<State>()) {
+  if (detail::names_no_file(path)) detail::refuse_nameless(path, "OpWriter", "stream.ops");
   State& st = *state_;
   st.path = path;
   st.box = box;

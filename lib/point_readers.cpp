@@ -89,12 +89,15 @@ std::vector<Point3> read_off(InputFile& f) {
   if (!ok_head)
     f.fail("header " + quote(head) + "; expected 'OFF' (or COFF/NOFF/STOFF); 4OFF and nOFF are not supported");
   if (n >= 2 && fields[1] == "BINARY") f.fail("binary OFF is not supported; expected an ASCII OFF file");
-  std::uint64_t nv = 0;
+  std::uint64_t nv = 0, nf = 0;
+  bool have_nf = false;
   if (n >= 2) {  // counts on the header line: "OFF nv nf ne"
     nv = parse_count(f, fields[1], "vertex count");
+    if ((have_nf = n >= 3)) nf = parse_count(f, fields[2], "face count");
   } else {
     if (!next_content_line(f, fields, 4, n)) f.fail("file ends before the counts line; expected 'nv nf ne'");
     nv = parse_count(f, fields[0], "vertex count");
+    if ((have_nf = n >= 2)) nf = parse_count(f, fields[1], "face count");
   }
   std::vector<Point3> pts;
   pts.reserve(sane_reserve(nv));
@@ -104,7 +107,17 @@ std::vector<Point3> read_off(InputFile& f) {
     if (n < 3) f.fail("vertex " + std::to_string(i) + " has " + std::to_string(n) + " field(s); expected 'x y z'");
     pts.push_back(parse_point(f, fields, "vertex"));
   }
-  return pts;  // faces are not needed
+  // The faces are not needed, but counted, a line each, and then the file must
+  // end: a vertex count too low would leave vertex lines there. (Without a face
+  // count, which OFF requires, nothing after the vertices is checked.)
+  if (have_nf) {
+    for (std::uint64_t i = 0; i < nf; ++i)
+      if (!next_content_line(f, fields, 1, n))
+        f.fail("file ends after " + std::to_string(i) + " of " + std::to_string(nf) + " faces");
+    require_end(f, "the " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
+                       " faces its header announces (is a count in the header too low?)");
+  }
+  return pts;
 }
 
 // ---- .ply ------------------------------------------------------------------
@@ -186,6 +199,19 @@ struct PlyElement {
   }
 };
 
+// Skips n bytes in pieces of at most 64 KiB: a length the file does not hold
+// costs no more memory than that before the end of the file says so. False
+// at end of file.
+bool skip_bytes(InputFile& f, std::uint64_t n, std::vector<unsigned char>& scratch) {
+  scratch.resize(std::size_t{1} << 16);
+  while (n > 0) {
+    const std::size_t part = static_cast<std::size_t>(std::min<std::uint64_t>(n, scratch.size()));
+    if (f.read_bytes(scratch.data(), part) != part) return false;
+    n -= part;
+  }
+  return true;
+}
+
 // Reads and checks one binary instance of an element into vals (one value per
 // scalar property; lists are skipped). Returns false at end of file.
 bool ply_binary_instance(InputFile& f, const PlyElement& e, bool big, std::vector<double>& vals,
@@ -197,17 +223,11 @@ bool ply_binary_instance(InputFile& f, const PlyElement& e, bool big, std::vecto
       const std::size_t cs = ply_size(p.count_type);
       if (f.read_bytes(cb, cs) != cs) return false;
       const double count = ply_value(p.count_type, cb, big);
-      if (count < 0) f.fail("negative list length in element '" + e.name + "'");
-      // Skipped in pieces of at most 64 KiB: a length the file does not
-      // hold (up to 2^32 - 1 items of 8 bytes) costs no more memory than
-      // that before the end of the file says so.
-      std::uint64_t left = static_cast<std::uint64_t>(count) * ply_size(p.type);
-      scratch.resize(std::size_t{1} << 16);
-      while (left > 0) {
-        const std::size_t part = static_cast<std::size_t>(std::min<std::uint64_t>(left, scratch.size()));
-        if (f.read_bytes(scratch.data(), part) != part) return false;
-        left -= part;
-      }
+      if (count < 0)
+        throw Error(ErrorCode::bad_format, f.path() + ": '" + e.name + "' element (byte " + std::to_string(f.offset()) +
+                                               "): negative list length " + std::to_string(static_cast<long long>(count)));
+      // Up to 2^32 - 1 items of 8 bytes.
+      if (!skip_bytes(f, static_cast<std::uint64_t>(count) * ply_size(p.type), scratch)) return false;
       vals.push_back(0);  // placeholder, keeps indices aligned with props
     } else {
       unsigned char vb[8];
@@ -279,6 +299,8 @@ std::vector<Point3> read_ply(InputFile& f) {
       break;
     }
   if (vi == elements.size()) f.fail("no 'vertex' element in the header");
+  for (std::size_t i = vi + 1; i < elements.size(); ++i)
+    if (elements[i].name == "vertex") f.fail("two 'vertex' elements in the header; expected one");
   const PlyElement& ve = elements[vi];
   int ix = -1, iy = -1, iz = -1;
   for (std::size_t i = 0; i < ve.props.size(); ++i) {
@@ -303,6 +325,7 @@ std::vector<Point3> read_ply(InputFile& f) {
     // One instance per line (what every PLY writer does). Elements before the
     // vertex element are skipped line by line.
     std::vector<std::string_view> tok(64);
+    std::size_t n_after = 0;
     for (std::size_t e = 0; e <= vi; ++e) {
       const PlyElement& el = elements[e];
       for (std::uint64_t k = 0; k < el.count; ++k) {
@@ -348,6 +371,20 @@ std::vector<Point3> read_ply(InputFile& f) {
         pts.push_back(p);
       }
     }
+    // The elements after the vertices (faces), a line each, and then nothing:
+    // a vertex count too low would leave vertex lines there.
+    for (std::size_t e = vi + 1; e < elements.size(); ++e) {
+      const PlyElement& el = elements[e];
+      for (std::uint64_t k = 0; k < el.count; ++k)
+        do {
+          if (!f.read_line(line))
+            f.fail("file ends after " + std::to_string(k) + " of " + std::to_string(el.count) + " '" + el.name +
+                   "' elements");
+        } while (split_fields(line, tok.data(), 1) == 0);
+    }
+    if (next_content_line(f, tok.data(), 1, n_after))
+      f.fail("a line after the elements the header announces (" + std::to_string(ve.count) +
+             " vertices); expected the file to end there: is a count in the header too low?");
     return pts;
   }
 
@@ -357,12 +394,24 @@ std::vector<Point3> read_ply(InputFile& f) {
   };
   std::vector<double> vals;
   std::vector<unsigned char> scratch;
-  for (std::size_t e = 0; e < vi; ++e) {  // skip the elements before the vertices
+  // Skips element e's instances: fixed-size ones at once (a count of empty
+  // instances is no loop), the others one at a time.
+  auto skip_element = [&](std::size_t e) {
     const PlyElement& el = elements[e];
+    if (!el.has_list()) {
+      const std::uint64_t stride = el.stride();
+      const std::uint64_t start = f.offset();
+      if (stride != 0 && (el.count > UINT64_MAX / stride || !skip_bytes(f, el.count * stride, scratch)))
+        throw Error(ErrorCode::bad_format, where(el.name, (f.offset() - start) / stride) + ": file ends after " +
+                                               std::to_string((f.offset() - start) / stride) + " of " +
+                                               std::to_string(el.count) + " '" + el.name + "' elements");
+      return;
+    }
     for (std::uint64_t k = 0; k < el.count; ++k)
       if (!ply_binary_instance(f, el, big, vals, scratch))
         throw Error(ErrorCode::bad_format, where(el.name, k) + ": file ends inside the element data");
-  }
+  };
+  for (std::size_t e = 0; e < vi; ++e) skip_element(e);  // the elements before the vertices
   if (!ve.has_list()) {
     // Fixed-size records: read in blocks.
     const std::size_t stride = ve.stride();
@@ -380,7 +429,9 @@ std::vector<Point3> read_ply(InputFile& f) {
         o += ply_size(ve.props[i].type);
       }
     }
-    const std::size_t block = 4096;
+    // Blocks of up to 4096 records and 1 MiB: a header of many properties
+    // must not allocate by its own say-so.
+    const std::size_t block = std::clamp<std::size_t>((std::size_t{1} << 20) / std::max<std::size_t>(stride, 1), 1, 4096);
     scratch.resize(block * stride);
     for (std::uint64_t k = 0; k < ve.count;) {
       const std::size_t take = static_cast<std::size_t>(std::min<std::uint64_t>(block, ve.count - k));
@@ -408,6 +459,11 @@ std::vector<Point3> read_ply(InputFile& f) {
       pts.push_back(p);
     }
   }
+  for (std::size_t e = vi + 1; e < elements.size(); ++e) skip_element(e);  // faces
+  if (const std::string_view rest = f.peek(1); !rest.empty())
+    throw Error(ErrorCode::bad_format, f.path() + ": bytes after the elements the header announces (at byte " +
+                                           std::to_string(f.offset()) + ", after " + std::to_string(ve.count) +
+                                           " vertices); expected the file to end there: is a count in the header too low?");
   return pts;
 }
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -326,6 +327,78 @@ TEST_CASE("ply binary little and big endian, mixed types, lists in other element
   expect_bad_points(p, p + ": 'vertex' element 0", "NaN");
 }
 
+TEST_CASE("ply: counts that disagree with the data, empty elements, many properties", "[io]") {
+  TempDir d;
+  const std::string vertex3 = "element vertex 1\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string one = le(1.0f) + le(2.0f) + le(3.0f);
+  const std::string p = d.file("c.ply");
+  // An element of no properties takes no bytes, whatever its count: skipped at
+  // once (it was a loop of 10^18 empty reads).
+  write_file(p, "ply\nformat binary_little_endian 1.0\nelement junk 1000000000000000000\n" + vertex3 +
+                    "end_header\n" + one);
+  CHECK(pdt::read_points(p) == std::vector<pdt::Point3>{{1, 2, 3}});
+  // Fixed-size elements before the vertices are skipped whole; one the file
+  // does not hold is refused.
+  write_file(p, "ply\nformat binary_little_endian 1.0\nelement pad 3\nproperty short s\n" + vertex3 +
+                    "end_header\n" + std::string(6, '\0') + one);
+  CHECK(pdt::read_points(p) == std::vector<pdt::Point3>{{1, 2, 3}});
+  write_file(p, "ply\nformat binary_little_endian 1.0\nelement pad 4000000000000000000\nproperty double s\n" +
+                    vertex3 + "end_header\n" + one);
+  expect_bad_points(p, p + ": 'pad' element 0", "file ends after 0 of 4000000000000000000 'pad' elements");
+  // Data after the last element: a vertex count too low (binary and ascii),
+  // here with a face element after the vertices.
+  const std::string faces = "element face 1\nproperty list uchar int v\n";
+  write_file(p, "ply\nformat binary_little_endian 1.0\n" + vertex3 + faces + "end_header\n" + one +
+                    le(std::uint8_t{1}) + le(std::int32_t{0}) + one);
+  expect_bad_points(p, p + ": bytes after the elements", "is a count in the header too low?");
+  write_file(p, "ply\nformat binary_little_endian 1.0\n" + vertex3 + faces + "end_header\n" + one +
+                    le(std::uint8_t{1}) + le(std::int32_t{0}));
+  CHECK(pdt::read_points(p).size() == 1);
+  write_file(p, "ply\nformat ascii 1.0\n" + vertex3 + faces + "end_header\n1 2 3\n1 0\n4 5 6\n");
+  expect_bad_points(p, p + ":12:", "a line after the elements the header announces");
+  write_file(p, "ply\nformat ascii 1.0\n" + vertex3 + faces + "end_header\n1 2 3\n1 0\n\n");
+  CHECK(pdt::read_points(p).size() == 1);
+  write_file(p, "ply\nformat ascii 1.0\n" + vertex3 + vertex3 + "end_header\n1 2 3\n4 5 6\n");
+  expect_bad_points(p, p + ":", "two 'vertex' elements");
+  // 60,000 properties (a 1 MB header, 480 kB a record): read in blocks of
+  // about 1 MiB, not 4096 records (1.9 GB).
+  {
+    std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex 2\n";
+    for (int i = 0; i < 60000; ++i) head += "property double e" + std::to_string(i) + "\n";
+    head += "property double x\nproperty double y\nproperty double z\nend_header\n";
+    std::string body;
+    for (double v : {1.0, 2.0}) body += std::string(60000 * 8, '\0') + le(v) + le(v) + le(v);
+    write_file(p, head + body);
+    auto peak_kib = [] {
+      rusage u{};
+      getrusage(RUSAGE_SELF, &u);
+      return u.ru_maxrss;
+    };
+    const long before = peak_kib();
+    CHECK(pdt::read_points(p) == std::vector<pdt::Point3>{{1, 1, 1}, {2, 2, 2}});
+    INFO("peak before " << before << " KiB, after " << peak_kib() << " KiB");
+    CHECK(peak_kib() - before < 256 * 1024);  // the header's names and a block: a few MiB
+  }
+  // A negative list length names the element and the byte.
+  write_file(p, "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty list char int l\n"
+                "property float x\nproperty float y\nproperty float z\nend_header\n" + le(std::int8_t{-5}) + one);
+  expect_bad_points(p, p + ": 'vertex' element (byte ", "negative list length -5");
+}
+
+TEST_CASE("text readers: a carriage return inside a line (CR-only line ends) is refused", "[io]") {
+  TempDir d;
+  const std::string xyz = d.file("mac.xyz"), off = d.file("mac.off");
+  write_file(xyz, "0 0 0\r1 0 0\r0 1 0\r0 0 1\r");
+  expect_bad_points(xyz, xyz + ":1:", "a carriage return (\\r) inside the line");
+  write_file(xyz, "0 0 0\r\n1 0 0\r\n");  // CR LF is fine
+  CHECK(pdt::read_points(xyz).size() == 2);
+  write_file(off, "OFF\r3 0 0\r");
+  expect_bad_points(off, off + ":1:", "CR alone");
+  // An empty file's error names the file without a line 0.
+  write_file(off, "");
+  expect_bad_points(off, off + ": empty file", "expected an 'OFF' header");
+}
+
 TEST_CASE("off, node and smesh", "[io]") {
   TempDir d;
   const std::string off = d.file("a.off");
@@ -339,6 +412,15 @@ TEST_CASE("off, node and smesh", "[io]") {
   expect_bad_points(off, off + ":4:", "file ends after 2 of 3 vertices");
   write_file(off, "OFX\n");
   expect_bad_points(off, off + ":1:", "expected 'OFF'");
+  // Lines after the faces the header counts: a vertex count too low.
+  write_file(off, "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n");
+  expect_bad_points(off, off + ":6:", "a line after the 3 vertices and 0 faces its header announces");
+  write_file(off, "OFF 0 0 0\n1 2 3\n");
+  expect_bad_points(off, off + ":2:", "a line after the 0 vertices");
+  write_file(off, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n");
+  expect_bad_points(off, off + ":5:", "file ends after 0 of 1 faces");
+  write_file(off, "OFF\n3\n0 0 0\n1 0 0\n0 1 0\nanything\n");  // no face count: the rest is not read
+  CHECK(pdt::read_points(off).size() == 3);
 
   const std::string node = d.file("m.node");
   write_file(node, "# TetGen\n3 3 1 1\n1 0 0 0 7.5 1\n2 1 0 0 7.5 0\n3 0 1 0 7.5 1\n");  // 1-based, attribute, marker

@@ -161,6 +161,25 @@ TEST_CASE("ops: a file named .opsb must be binary, an empty one included", "[io]
   CHECK(pdt::read_ops(d.file("b.ops")).ops.size() == 1);
 }
 
+TEST_CASE("ops writers refuse a path that names no file before writing", "[io]") {
+  TempDir d;
+  const std::filesystem::path cwd = std::filesystem::current_path();
+  std::filesystem::current_path(d.path());
+  for (const std::string& path : {std::string(), d.file("sub") + "/"}) {
+    INFO("path '" << path << "'");
+    auto e = catch_error([&] { pdt::write_ops(path, tricky_stream()); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("write_ops: '" + path + "' names no file") == 0);
+    e = catch_error([&] { pdt::OpWriter w(path); });
+    REQUIRE(e);
+    CHECK(e->code() == pdt::ErrorCode::invalid_argument);
+    CHECK(std::string(e->what()).find("OpWriter: '" + path + "' names no file") == 0);
+  }
+  std::filesystem::current_path(cwd);
+  CHECK(d.entries() == 0);  // no temporary left behind
+}
+
 TEST_CASE("ops without a box, empty streams, counts", "[io]") {
   TempDir d;
   pdt::OpStream s;

@@ -16,7 +16,11 @@ namespace pdt {
 // (ascii, binary_little_endian or binary_big_endian; only the 'vertex'
 // element's x y z), .off (vertices only), .node (TetGen),
 // .smesh (TetGen PLC node section). Throws pdt::Error(bad_format) with file and
-// line, or pdt::Error(io_failure).
+// line, or pdt::Error(io_failure). A header's counts must match the data: lines
+// or bytes after the elements a .ply, .off (with its face count) or .node
+// header announces are refused, as a count too low would otherwise drop points
+// silently. Lines end in LF or CR LF; a CR inside a line (a file of CR-only
+// line ends) is refused.
 std::vector<Point3> read_points(const std::string& path);
 
 // A tetrahedral mesh as plain arrays: what the writers take and check_mesh reads.

@@ -3,6 +3,7 @@
 // rollback, a parked undo, an escalation or a dimension change do, and
 // delivering its result.
 #include <cassert>
+#include <limits>
 
 #include "engine_state.hpp"
 #include "pdt/error.hpp"
@@ -45,7 +46,14 @@ OpStatus EngineState::run_op(Worker& w, OpContext& ctx, OpRecord& op, OpResult& 
       if (t.state != TicketState::inserted)
         throw Error(ErrorCode::unknown_vertex,
                     "cannot undo insertion " + std::to_string(op.ticket) + ": that insertion failed");
-      return impl.remove(ctx, t.vertex, t.stamp, r.remove);
+      try {
+        return impl.remove(ctx, t.vertex, t.stamp, r.remove);
+      } catch (const Error& e) {
+        if (e.code() != ErrorCode::unknown_vertex) throw;
+        throw Error(ErrorCode::unknown_vertex,
+                    "cannot undo insertion " + std::to_string(op.ticket) + " (vertex " + std::to_string(t.vertex) +
+                        "): its vertex was removed meanwhile (by handle or id)");
+      }
     }
     case OpKind::locate:
       return impl.locate(ctx, to_kpoint(op.point), no_vertex, no_cell, r.locate);
@@ -113,7 +121,9 @@ EngineState::Outcome EngineState::execute(Worker& w, OpRecord* opp) {
       w.attempts.fetch_add(1, std::memory_order_relaxed);
       w.rollbacks.fetch_add(1, std::memory_order_relaxed);
       w.contention.attempted();
-      if (opts.escalate_after && ++op.rollbacks >= opts.escalate_after && run_global(w, opp, true)) {
+      // Counted whether or not escalation is on: OpResult::rollbacks reports it.
+      if (op.rollbacks != std::numeric_limits<std::uint32_t>::max()) ++op.rollbacks;
+      if (opts.escalate_after && op.rollbacks >= opts.escalate_after && run_global(w, opp, true)) {
         w.escalated.fetch_add(1, std::memory_order_relaxed);
         return Outcome::done;
       }

@@ -47,7 +47,12 @@ OpStatus Triangulation::Impl::remove(OpContext& ctx, VertexId v, std::uint64_t e
   if (verts[v].multiplicity == 0 || (expected_stamp && verts[v].stamp.load(std::memory_order_relaxed) != expected_stamp)) {
     release_all(ctx);
     std::ostringstream os;
-    os << "cannot remove vertex " << v << ": it is not in the triangulation (already removed, or never inserted)";
+    if (expected_stamp)  // a handle, an undo, or an engine's removal pinned at submission: it was in once
+      os << "cannot remove vertex " << v
+         << ": the incarnation of it this removal names was already removed (a stale handle, or another "
+            "removal ran first)";
+    else
+      os << "cannot remove vertex " << v << ": it is not in the triangulation (already removed, or never inserted)";
     throw Error(ErrorCode::unknown_vertex, os.str());
   }
   if (verts[v].multiplicity > 1) {

@@ -555,13 +555,22 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   ErrorSink errors;
   bool slept = false, removed_while_held = false;
   std::atomic<int> removal_done{0};
+  std::atomic<std::uint64_t> reported_rollbacks{0};  // the OpResults' sum: each operation's own count
   pdt::EngineStats st;
   tbb::task_arena arena(2);
   arena.execute([&] {
     pdt::Engine e(t, {{0, 0, 0}, {1, 1, 1}}, o);
     REQUIRE(pdt::detail::impl_of(t).lock_exclusive(holder, victim));
-    e.remove(victim, [&](const pdt::OpResult& r) { removal_done.store(r.error ? 2 : 1); });
-    for (const auto& p : more) e.insert(p, errors.callback());
+    e.remove(victim, [&](const pdt::OpResult& r) {
+      reported_rollbacks += r.rollbacks;
+      removal_done.store(r.error ? 2 : 1);
+    });
+    const pdt::Engine::Callback to_errors = errors.callback();
+    for (const auto& p : more)
+      e.insert(p, [&, to_errors](const pdt::OpResult& r) {
+        reported_rollbacks += r.rollbacks;
+        to_errors(r);
+      });
     // Wait (at most 20 s) until the contention manager has put someone to sleep.
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
     while (e.stats().total().sleeps == 0 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
@@ -579,6 +588,7 @@ TEST_CASE("engine: the contention manager suspends a worker that keeps rolling b
   REQUIRE(total.max_rollbacks_per_completed > 0);
   REQUIRE(total.completed == more.size() + 1);
   REQUIRE(total.attempts == total.completed + total.rollbacks);
+  CHECK(reported_rollbacks.load() == total.rollbacks);  // also without escalation (escalate_after = 0)
   REQUIRE(total.seconds_asleep >= 0);
   errors.require_none();
   // (The victim's id may have been recycled by a later insertion: look for its point.)

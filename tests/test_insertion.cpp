@@ -1096,6 +1096,10 @@ TEST_CASE("a vertex handle reads as dead in any other triangulation, a moved-ove
       FAIL("a handle of another triangulation was accepted");
     } catch (const pdt::Error& e) {
       CHECK(e.code() == pdt::ErrorCode::unknown_vertex);
+      // Named as a stale incarnation, not as a vertex never inserted: its id is live.
+      INFO(e.what());
+      CHECK(std::string(e.what()).find("the incarnation of it this removal names was already removed") !=
+            std::string::npos);
     }
   }
   CHECK(t.number_of_vertices() == pts.size());

@@ -105,6 +105,10 @@ EngineState::Outcome EngineState::execute(Worker& w, OpRecord* opp) {
   }
   if (!world.enter(w.index)) return Outcome::global;  // stopped: wait, then retry
   OpContext& ctx = *w.ctx;
+  struct ReleaseLargeScratchAfter {  // however this attempt ends: its scratch is dead then
+    OpContext& ctx;
+    ~ReleaseLargeScratchAfter() { ctx.release_large_scratch(); }
+  } const release{ctx};
   OpResult r;
   OpStatus s = OpStatus::done;
   std::uint64_t stamp = 0;
@@ -153,6 +157,7 @@ bool EngineState::run_global(Worker& w, OpRecord* opp, bool escalated) {
   } catch (...) {
     r.error = std::current_exception();
   }
+  impl.seq->release_large_scratch();  // while the world is still stopped: the context is ours
   try {
     ensure_grid(true);
   } catch (const std::bad_alloc&) {

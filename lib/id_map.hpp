@@ -41,6 +41,10 @@ class IdMap {
   }
   // Makes room for `entries` without rehashing; may clear the map.
   void reserve_for(std::size_t entries);
+  std::size_t slots() const { return keys_.size(); }
+  // Frees the table (between operations: the entries are lost); the next
+  // insertion grows it again.
+  void release() { *this = IdMap(); }
 
  private:
   static constexpr std::uint64_t empty_key = ~std::uint64_t{0};

@@ -124,6 +124,15 @@ struct OpContext {
   std::vector<CellId> created;         // cells the current operation made
   std::vector<CellHandle> destroyed;   // cells it deleted (when report_destroyed)
   std::vector<CellView> views;         // the report's cells
+  // Between operations: scratch that an unusually large operation grew past
+  // scratch_kept entries (a cavity of a point inside thousands of cospherical
+  // points, the link of its removal) is freed, so that what a context keeps
+  // follows the live mesh, not the largest operation it ever ran: 16 workers
+  // that each met one such cavity kept about 15 MB apiece. Only operations
+  // that large pay for the allocations again, in proportion to their work.
+  // Never during an operation: the scratch holds its state (pools.cpp).
+  static constexpr std::size_t scratch_kept = std::size_t{1} << 14;
+  void release_large_scratch();
   std::uint64_t next_random() {
     rng ^= rng << 13;
     rng ^= rng >> 7;

@@ -164,6 +164,28 @@ Triangulation::Impl::Impl(bool small_triangulation)
 
 Triangulation::Impl::~Impl() = default;
 
+void detail::OpContext::release_large_scratch() {
+  auto release = [](auto& v) {
+    if (v.capacity() > scratch_kept) std::remove_reference_t<decltype(v)>().swap(v);
+  };
+  release(conflict_zone);
+  release(boundary);
+  release(cone_edge);
+  release(hole);
+  release(link);
+  release(small_facet_boundary);
+  release(small_inside);
+  release(small_to_new);
+  release(small_star);
+  release(small_seen);  // regrown with zeros: no generation matches them
+  release(created);
+  release(destroyed);
+  release(views);
+  for (IdMap* m : {&new_cell_by_edge, &hole_facet_by_triple, &star_seen})
+    if (m->slots() > 2 * scratch_kept) m->release();
+  if (small && small->cells.size() > scratch_kept) small.reset();  // made again by the next removal
+}
+
 std::uint32_t Triangulation::Impl::new_context_id() {
   const std::uint32_t id = next_context_id.fetch_add(1, std::memory_order_relaxed);
   // Lock words hold -(owner) in an int32: ids must stay below 2^31. Ids are

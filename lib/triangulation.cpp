@@ -83,10 +83,20 @@ Triangulation& Triangulation::operator=(Triangulation&& o) {
   return *this;
 }
 
+namespace {
+// After a sequential mutator (also when it throws): the sequential context's
+// scratch keeps no more than OpContext::scratch_kept entries.
+struct ReleaseLargeScratchAfter {
+  detail::OpContext& ctx;
+  ~ReleaseLargeScratchAfter() { ctx.release_large_scratch(); }
+};
+}  // namespace
+
 InsertResult Triangulation::insert(const Point3& p, Hint hint) {
   require_detached(*impl_, "insert");
   require_finite(p);
   Impl& m = *impl_;
+  const ReleaseLargeScratchAfter release{*m.seq};
   VertexId start = hint.vertex;
   if (start == no_vertex && hint.cell != no_cell && m.cell_alive(hint.cell))
     for (int i = 0; i < 4 && start == no_vertex; ++i)
@@ -100,6 +110,7 @@ InsertResult Triangulation::insert_if_alive(const Point3& p, CellHandle h) {
   require_detached(*impl_, "insert_if_alive");
   require_finite(p);
   Impl& m = *impl_;
+  const ReleaseLargeScratchAfter release{*m.seq};
   Impl::Inserted out;
   m.insert(*m.seq, to_kpoint(p), no_vertex, out, &h);  // single-threaded: always done
   return out.result;
@@ -114,6 +125,7 @@ std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> po
   const std::vector<std::uint32_t> order = detail::spatial_order(points, false);
   std::vector<InsertResult> out(points.size());
   Impl& m = *impl_;
+  const ReleaseLargeScratchAfter release{*m.seq};  // once, after the whole batch
   // A batch at least as large as the mesh: its vertices are not noted in
   // the jump grid one by one (OpContext::large_batch), also if one throws.
   struct LargeBatch {
@@ -146,6 +158,7 @@ std::vector<InsertResult> Triangulation::insert_batch(std::span<const Point3> po
 RemoveResult Triangulation::remove(VertexId v) {
   require_detached(*impl_, "remove");
   RemoveResult out = RemoveResult::removed;
+  const ReleaseLargeScratchAfter release{*impl_->seq};
   impl_->remove(*impl_->seq, v, 0, out);
   return out;
 }
@@ -156,6 +169,7 @@ RemoveResult Triangulation::remove(VertexHandle v) {
     throw Error(ErrorCode::unknown_vertex,
                 "cannot remove vertex " + std::to_string(v.id) + ": the handle has no incarnation (an empty handle)");
   RemoveResult out = RemoveResult::removed;
+  const ReleaseLargeScratchAfter release{*impl_->seq};
   impl_->remove(*impl_->seq, v.id, v.incarnation, out);
   return out;
 }

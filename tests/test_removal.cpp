@@ -774,3 +774,43 @@ TEST_CASE("a cell renewed in place at retire_at (a hull vertex with a flat link 
   pts.push_back({0.5, 0.5, 0.05});
   REQUIRE(canonical_tets(t, pts) == cgal_tets(pts));
 }
+
+TEST_CASE("after a huge cavity and its removal, the context keeps no more scratch than scratch_kept", "[remove][memory]") {
+  // A point at the centre of 3000 exactly cospherical points conflicts with
+  // every cell; removing it triangulates a link of all 3000. The scratch that
+  // took (and the link triangulation) is freed afterwards: a context's memory
+  // follows the live mesh, not the largest operation it met (with 16 engine
+  // workers that each met one, 270 MB against a 13 MB mesh before).
+  const std::vector<Point3> pts = generated_points(pdt::Distribution::sphere, 3000, 1);
+  pdt::Triangulation t;
+  t.insert_batch(pts);
+  auto& impl = pdt::detail::impl_of(t);
+  using Context = std::remove_reference_t<decltype(*impl.seq)>;
+  constexpr std::size_t kept = Context::scratch_kept;
+  std::size_t zone_during = 0, views_during = 0, link_cells_during = 0;
+  t.set_change_hook([&](const pdt::Changes& c) {  // inside the operation: its scratch in use
+    zone_during = std::max(zone_during, impl.seq->conflict_zone.capacity());
+    views_during = std::max(views_during, c.created.size());
+    if (impl.seq->small) link_cells_during = std::max<std::size_t>(link_cells_during, impl.seq->small->cells.size());
+  });
+  const pdt::InsertResult centre = t.insert({0, 0, 0});
+  REQUIRE(centre.inserted);
+  INFO("conflict zone " << zone_during << ", cells made " << views_during);
+  REQUIRE(zone_during > kept);  // the operation did need more than is kept
+  CHECK(impl.seq->conflict_zone.capacity() <= kept);
+  CHECK(impl.seq->boundary.capacity() <= kept);
+  CHECK(impl.seq->created.capacity() <= kept);
+  CHECK(impl.seq->views.capacity() <= kept);
+  t.remove(centre.vertex);
+  INFO("link triangulation cells " << link_cells_during);
+  REQUIRE(link_cells_during > kept);
+  CHECK(impl.seq->small == nullptr);
+  CHECK(impl.seq->hole.capacity() <= kept);
+  CHECK(impl.seq->small_facet_boundary.capacity() <= kept);
+  // And the next huge operation makes them again, with the same result.
+  t.set_change_hook(nullptr);
+  const pdt::VertexId again = t.insert({0, 0, 0}).vertex;
+  CHECK(t.remove(again) == pdt::RemoveResult::removed);
+  require_valid(t);
+  CHECK(t.number_of_vertices() == pts.size());
+}

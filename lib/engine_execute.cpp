@@ -105,10 +105,7 @@ EngineState::Outcome EngineState::execute(Worker& w, OpRecord* opp) {
   }
   if (!world.enter(w.index)) return Outcome::global;  // stopped: wait, then retry
   OpContext& ctx = *w.ctx;
-  struct ReleaseLargeScratchAfter {  // however this attempt ends: its scratch is dead then
-    OpContext& ctx;
-    ~ReleaseLargeScratchAfter() { ctx.release_large_scratch(); }
-  } const release{ctx};
+  const OpContext::ReleaseLargeScratchAfter release{ctx};  // however this attempt ends: its scratch is dead then
   OpResult r;
   OpStatus s = OpStatus::done;
   std::uint64_t stamp = 0;

@@ -133,6 +133,12 @@ struct OpContext {
   // Never during an operation: the scratch holds its state (pools.cpp).
   static constexpr std::size_t scratch_kept = std::size_t{1} << 14;
   void release_large_scratch();
+  // Calls release_large_scratch when it goes out of scope, however the
+  // operation (or attempt) it guards ends.
+  struct ReleaseLargeScratchAfter {
+    OpContext& ctx;
+    ~ReleaseLargeScratchAfter() { ctx.release_large_scratch(); }
+  };
   std::uint64_t next_random() {
     rng ^= rng << 13;
     rng ^= rng >> 7;

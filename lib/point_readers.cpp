@@ -322,11 +322,12 @@ std::vector<Point3> read_ply(InputFile& f) {
   };
 
   if (fmt == Fmt::ascii) {
-    // One instance per line (what every PLY writer does). Elements before the
-    // vertex element are skipped line by line.
+    // One instance per line (what every PLY writer does). The other elements
+    // (before the vertices, and the faces after them) are skipped line by
+    // line, and then the file must end: a vertex count too low would leave
+    // vertex lines there.
     std::vector<std::string_view> tok(64);
-    std::size_t n_after = 0;
-    for (std::size_t e = 0; e <= vi; ++e) {
+    for (std::size_t e = 0; e < elements.size(); ++e) {
       const PlyElement& el = elements[e];
       for (std::uint64_t k = 0; k < el.count; ++k) {
         std::size_t n = 0;
@@ -371,17 +372,7 @@ std::vector<Point3> read_ply(InputFile& f) {
         pts.push_back(p);
       }
     }
-    // The elements after the vertices (faces), a line each, and then nothing:
-    // a vertex count too low would leave vertex lines there.
-    for (std::size_t e = vi + 1; e < elements.size(); ++e) {
-      const PlyElement& el = elements[e];
-      for (std::uint64_t k = 0; k < el.count; ++k)
-        do {
-          if (!f.read_line(line))
-            f.fail("file ends after " + std::to_string(k) + " of " + std::to_string(el.count) + " '" + el.name +
-                   "' elements");
-        } while (split_fields(line, tok.data(), 1) == 0);
-    }
+    std::size_t n_after = 0;
     if (next_content_line(f, tok.data(), 1, n_after))
       f.fail("a line after the elements the header announces (" + std::to_string(ve.count) +
              " vertices); expected the file to end there: is a count in the header too low?");

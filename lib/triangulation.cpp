@@ -83,14 +83,9 @@ Triangulation& Triangulation::operator=(Triangulation&& o) {
   return *this;
 }
 
-namespace {
-// After a sequential mutator (also when it throws): the sequential context's
-// scratch keeps no more than OpContext::scratch_kept entries.
-struct ReleaseLargeScratchAfter {
-  detail::OpContext& ctx;
-  ~ReleaseLargeScratchAfter() { ctx.release_large_scratch(); }
-};
-}  // namespace
+// After each sequential mutator (also when it throws), the sequential context
+// keeps no more scratch than OpContext::scratch_kept entries a container.
+using ReleaseLargeScratchAfter = detail::OpContext::ReleaseLargeScratchAfter;
 
 InsertResult Triangulation::insert(const Point3& p, Hint hint) {
   require_detached(*impl_, "insert");

@@ -113,6 +113,13 @@ void append_double(std::string& out, double v) {
   out.append(buf, ptr);
 }
 
+std::string counted(std::uint64_t n, std::string_view one, std::string_view many) {
+  std::string s = std::to_string(n);
+  s += ' ';
+  s += n == 1 ? one : many;
+  return s;
+}
+
 void append_uint(std::string& out, std::uint64_t v) {
   char buf[24];
   auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v);

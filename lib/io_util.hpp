@@ -49,6 +49,9 @@ std::string quote(std::string_view s);
 void append_double(std::string& out, double v);
 void append_uint(std::string& out, std::uint64_t v);
 
+// "1 vertex", "2 vertices": n and the noun that agrees with it, for messages.
+std::string counted(std::uint64_t n, std::string_view one, std::string_view many);
+
 // ---- reading ---------------------------------------------------------------
 
 // Buffered sequential reader over a file, transparently gunzipping gzip data.

@@ -153,8 +153,8 @@ MeshCheck check_mesh(const Mesh& mesh) {
     const auto& c = T[t];
     for (int i = 0; i < 4; ++i) {
       if (c[static_cast<std::size_t>(i)] >= np)
-        return fail(r, tet_str(t) + " uses " + pt_str(c[static_cast<std::size_t>(i)]) + ", but there are only " +
-                           std::to_string(np) + " points");
+        return fail(r, tet_str(t) + " uses " + pt_str(c[static_cast<std::size_t>(i)]) +
+                           (np == 1 ? ", but there is only 1 point" : ", but there are only " + std::to_string(np) + " points"));
     }
     const CGAL::Orientation o = CGAL::orientation(P[c[0]], P[c[1]], P[c[2]], P[c[3]]);
     if (o == CGAL::COPLANAR) return fail(r, tet_str(t) + " is flat (its 4 points are coplanar or repeated)");

@@ -38,7 +38,7 @@ namespace {
 // and for TetGen's pair a name that is its extension alone (".node": the files
 // would be hidden ".node" and ".ele"). A VTK file named ".vtu" is a (hidden)
 // name like any other.
-void refuse_nameless(const std::string& path, const char* who, bool tetgen_pair) {
+void refuse_mesh_path_naming_no_file(const std::string& path, const char* who, bool tetgen_pair) {
   if (detail::names_no_file(path) ||
       (tetgen_pair && tetgen_files(path.substr(path.find_last_of('/') + 1)).node == ".node"))
     detail::refuse_nameless(path, who, tetgen_pair ? "mesh.node" : "mesh.vtu");
@@ -60,8 +60,9 @@ void refuse_unwritable(const Mesh& mesh, const char* who) {
     for (std::uint32_t v : mesh.tets[t])
       if (v >= n)
         throw Error(ErrorCode::invalid_argument, std::string(who) + ": tetrahedron " + std::to_string(t) +
-                                                     " uses point " + std::to_string(v) + " but there are only " +
-                                                     std::to_string(n) + " points");
+                                                     " uses point " + std::to_string(v) + " but there " +
+                                                     (n == 1 ? "is only " : "are only ") +
+                                                     detail::counted(n, "point", "points"));
 }
 
 // A field name as an XML attribute value: & < > " ' escaped, and tab,
@@ -168,7 +169,7 @@ namespace {
 template <class EachPoint, class EachTet>
 void write_tetgen_files(const std::string& path, std::size_t points, EachPoint each_point, std::size_t tets,
                         EachTet each_tet) {
-  refuse_nameless(path, "write_tetgen", true);
+  refuse_mesh_path_naming_no_file(path, "write_tetgen", true);
   const TetgenFiles files = tetgen_files(path);
   detail::OutputFile node(files.node);
   detail::OutputFile ele(files.ele);
@@ -280,7 +281,7 @@ void put_ascii(detail::OutputFile& out, const T* v, std::size_t n, std::size_t p
 }  // namespace
 
 void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, std::span<const CellField> cell_fields) {
-  refuse_nameless(path, "write_vtu", false);
+  refuse_mesh_path_naming_no_file(path, "write_vtu", false);
   refuse_unwritable(mesh, "write_vtu");
   refuse_unreadable_names(cell_fields);
   for (const CellField& f : cell_fields)

@@ -103,7 +103,7 @@ std::vector<Point3> read_off(InputFile& f) {
   pts.reserve(sane_reserve(nv));
   for (std::uint64_t i = 0; i < nv; ++i) {
     if (!next_content_line(f, fields, 3, n))
-      f.fail("file ends after " + std::to_string(i) + " of " + std::to_string(nv) + " vertices");
+      f.fail("file ends after " + std::to_string(i) + " of " + detail::counted(nv, "vertex", "vertices"));
     if (n < 3) f.fail("vertex " + std::to_string(i) + " has " + std::to_string(n) + " field(s); expected 'x y z'");
     pts.push_back(parse_point(f, fields, "vertex"));
   }
@@ -113,9 +113,9 @@ std::vector<Point3> read_off(InputFile& f) {
   if (have_nf) {
     for (std::uint64_t i = 0; i < nf; ++i)
       if (!next_content_line(f, fields, 1, n))
-        f.fail("file ends after " + std::to_string(i) + " of " + std::to_string(nf) + " faces");
-    require_end(f, "the " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
-                       " faces its header announces (is a count in the header too low?)");
+        f.fail("file ends after " + std::to_string(i) + " of " + detail::counted(nf, "face", "faces"));
+    require_end(f, "the " + detail::counted(nv, "vertex", "vertices") + " and " + detail::counted(nf, "face", "faces") +
+                       " its header announces (is a count in the header too low?)");
   }
   return pts;
 }
@@ -374,8 +374,8 @@ std::vector<Point3> read_ply(InputFile& f) {
     }
     std::size_t n_after = 0;
     if (next_content_line(f, tok.data(), 1, n_after))
-      f.fail("a line after the elements the header announces (" + std::to_string(ve.count) +
-             " vertices); expected the file to end there: is a count in the header too low?");
+      f.fail("a line after the elements the header announces (" + detail::counted(ve.count, "vertex", "vertices") +
+             "); expected the file to end there: is a count in the header too low?");
     return pts;
   }
 
@@ -429,8 +429,8 @@ std::vector<Point3> read_ply(InputFile& f) {
       const std::size_t got = f.read_bytes(scratch.data(), take * stride);
       if (got != take * stride)
         throw Error(ErrorCode::bad_format, where("vertex", k + got / stride) + ": file ends after " +
-                                               std::to_string(k + got / stride) + " of " + std::to_string(ve.count) +
-                                               " vertices");
+                                               std::to_string(k + got / stride) + " of " +
+                                               detail::counted(ve.count, "vertex", "vertices"));
       for (std::size_t j = 0; j < take; ++j, ++k) {
         const unsigned char* r = scratch.data() + j * stride;
         Point3 p{ply_value(type[0], r + off[0], big), ply_value(type[1], r + off[1], big),
@@ -453,8 +453,8 @@ std::vector<Point3> read_ply(InputFile& f) {
   for (std::size_t e = vi + 1; e < elements.size(); ++e) skip_element(e);  // faces
   if (const std::string_view rest = f.peek(1); !rest.empty())
     throw Error(ErrorCode::bad_format, f.path() + ": bytes after the elements the header announces (at byte " +
-                                           std::to_string(f.offset()) + ", after " + std::to_string(ve.count) +
-                                           " vertices); expected the file to end there: is a count in the header too low?");
+                                           std::to_string(f.offset()) + ", after " +
+                                           detail::counted(ve.count, "vertex", "vertices") + "); expected the file to end there: is a count in the header too low?");
   return pts;
 }
 

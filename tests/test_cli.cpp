@@ -93,6 +93,8 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
         {"run", "run needs an input file"},
         {"run a.ops b.ops", "run takes one input file; got 'a.ops' and 'b.ops'"},
         {"run a.ops --threads -1", "--threads '-1': expected a non-negative integer"},
+        {"gen --points -0 --out x.ops", "--points '-0': expected a non-negative integer"},
+        {"gen --points 1 --seed -0e0 --out x.ops", "--seed '-0e0': expected a non-negative integer"},
         {"run a.ops --out mesh.stl", "--out mesh.stl: expected a name ending in .node (TetGen) or .vtu (VTK)"},
         {"run a.ops --vtu-ascii", "--vtu-ascii applies to a .vtu output"},
         {"run a.ops --out m.node --vtu-ascii", "--vtu-ascii applies to a .vtu output"},

@@ -418,7 +418,14 @@ TEST_CASE("off, node and smesh", "[io]") {
   write_file(off, "OFF 0 0 0\n1 2 3\n");
   expect_bad_points(off, off + ":2:", "a line after the 0 vertices");
   write_file(off, "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n");
-  expect_bad_points(off, off + ":5:", "file ends after 0 of 1 faces");
+  expect_bad_points(off, off + ":5:", "file ends after 0 of 1 face");
+  {
+    auto e = catch_error([&] { pdt::read_points(off); });  // "1 face", not "1 faces"
+    REQUIRE(e);
+    CHECK(std::string(e->what()).find("faces") == std::string::npos);
+  }
+  write_file(off, "OFF\n1 0 0\n");
+  expect_bad_points(off, off + ":2:", "file ends after 0 of 1 vertex");
   write_file(off, "OFF\n3\n0 0 0\n1 0 0\n0 1 0\nanything\n");  // no face count: the rest is not read
   CHECK(pdt::read_points(off).size() == 3);
 

@@ -192,7 +192,7 @@ std::uint64_t parse_count_option(const Args& args, const char* name, const std::
     return n;
   }
   double d = 0;
-  if (pdt::support::parse_real(v, d) && d >= 0 && d == std::floor(d)) {
+  if (pdt::support::parse_real(v, d) && !std::signbit(d) && d == std::floor(d)) {
     if (d >= 0x1p64 || d > static_cast<double>(max)) too_large();  // the limit first: it holds in digits too
     usage_error(args.usage(), std::string(name) + " '" + v +
                                   "': with a decimal point or an exponent at most 2^53 (9007199254740992); "

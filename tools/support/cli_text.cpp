@@ -18,7 +18,8 @@ bool parse_count(std::string_view s, unsigned long long& out) {
   const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), out);
   if (!s.empty() && ec == std::errc{} && end == s.data() + s.size()) return true;
   double d = 0;
-  if (!parse_real(s, d) || d < 0 || d > 9007199254740992.0 || d != std::floor(d)) return false;
+  if (!parse_real(s, d) || std::signbit(d) ||  // "-0" too: a count has no sign
+       d > 9007199254740992.0 || d != std::floor(d)) return false;
   out = static_cast<unsigned long long>(d);
   return true;
 }

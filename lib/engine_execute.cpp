@@ -4,6 +4,7 @@
 // delivering its result.
 #include <cassert>
 #include <limits>
+#include <utility>
 
 #include "engine_state.hpp"
 #include "pdt/error.hpp"
@@ -149,11 +150,16 @@ bool EngineState::run_global(Worker& w, OpRecord* opp, bool escalated) {
   OpResult r;
   r.escalated = escalated;
   std::uint64_t stamp = 0;
+  // What it does counts as this worker's: the sequential context's stats are
+  // the triangulation's own (Triangulation::stats), which the workers' join
+  // only when the engine goes.
+  std::swap(impl.seq->stats, w.ctx->stats);
   try {
     run_op(w, *impl.seq, *opp, r, stamp);  // single-threaded: always done
   } catch (...) {
     r.error = std::current_exception();
   }
+  std::swap(impl.seq->stats, w.ctx->stats);
   impl.seq->release_large_scratch();  // while the world is still stopped: the context is ours
   try {
     ensure_grid(true);

@@ -250,6 +250,27 @@ TEST_CASE("contract: a moved-from triangulation is empty and usable", "[engine][
   require_valid(b);
 }
 
+TEST_CASE("contract: Triangulation::stats leaves out an attached engine's operations, global steps too",
+          "[engine][contract]") {
+  // The first points raise the dimension: each runs with the world stopped,
+  // in the triangulation's own context, and counted there until the engine
+  // went (an outside client summing both counted them twice).
+  pdt::Triangulation t;
+  (void)t.insert({0.5, 0.5, 0.5});
+  const std::vector<Point3> pts = random_points(40, 5);
+  tbb::task_arena arena(2);
+  arena.execute([&] {
+    pdt::Engine e(t, kUnit, options_with(2));
+    for (const Point3& p : pts) e.insert(p, {});
+    e.drain();
+    const pdt::EngineStats es = e.stats();
+    REQUIRE(es.global_operations > 0);
+    CHECK(es.total().completed == pts.size());
+    CHECK(t.stats().insertions == 1);  // its own, before the engine
+  });
+  CHECK(t.stats().insertions == 1 + pts.size());
+}
+
 // =============================================================================
 // 2. Queries from many threads
 // =============================================================================

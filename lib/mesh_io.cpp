@@ -26,10 +26,18 @@
 namespace pdt {
 
 TetgenFiles tetgen_files(const std::string& path) {
-  std::string base = path;
-  for (const char* ext : {".node", ".ele"})
-    if (detail::ends_with_nocase(path, ext)) base = path.substr(0, path.size() - std::strlen(ext));
-  return {base + ".node", base + ".ele"};
+  // The named file keeps its name; its partner's extension is upper case if
+  // the named one's is ("mesh.NODE": "mesh.ELE").
+  for (const char* ext : {".node", ".ele"}) {
+    const std::size_t n = std::strlen(ext);
+    if (!detail::ends_with_nocase(path, ext)) continue;
+    const std::string base = path.substr(0, path.size() - n);
+    const bool upper = std::all_of(path.end() - static_cast<std::ptrdiff_t>(n) + 1, path.end(),
+                                   [](char c) { return c >= 'A' && c <= 'Z'; });
+    const std::string node = upper ? ".NODE" : ".node", ele = upper ? ".ELE" : ".ele";
+    return ext[1] == 'n' ? TetgenFiles{path, base + ele} : TetgenFiles{base + node, path};
+  }
+  return {path + ".node", path + ".ele"};
 }
 
 namespace {
@@ -39,8 +47,9 @@ namespace {
 // would be hidden ".node" and ".ele"). A VTK file named ".vtu" is a (hidden)
 // name like any other.
 void refuse_mesh_path_naming_no_file(const std::string& path, const char* who, bool tetgen_pair) {
-  if (detail::names_no_file(path) ||
-      (tetgen_pair && tetgen_files(path.substr(path.find_last_of('/') + 1)).node == ".node"))
+  const std::string name = path.substr(path.find_last_of('/') + 1);
+  const std::string node = tetgen_files(name).node;
+  if (detail::names_no_file(path) || (tetgen_pair && node.size() == 5 && detail::ends_with_nocase(node, ".node")))
     detail::refuse_nameless(path, who, tetgen_pair ? "mesh.node" : "mesh.vtu");
 }
 

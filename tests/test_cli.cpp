@@ -95,7 +95,7 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
         {"run a.ops --threads -1", "--threads '-1': expected a non-negative integer"},
         {"gen --points -0 --out x.ops", "--points '-0': expected a non-negative integer"},
         {"gen --points 1 --seed -0e0 --out x.ops", "--seed '-0e0': expected a non-negative integer"},
-        {"run a.ops --out mesh.stl", "--out mesh.stl: expected a name ending in .node (TetGen) or .vtu (VTK)"},
+        {"run a.ops --out mesh.stl", "--out mesh.stl: expected a name ending in .node or .ele (TetGen's pair of files) or .vtu (VTK)"},
         {"run a.ops --vtu-ascii", "--vtu-ascii applies to a .vtu output"},
         {"run a.ops --out m.node --vtu-ascii", "--vtu-ascii applies to a .vtu output"},
         {"run a.ops --in-order", "--in-order applies to point files"},

@@ -476,10 +476,21 @@ TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]"
     CHECK(r.tets == m.tets);
     CHECK(d.entries() == 2);
   }
-  // Any case of the extension is replaced; any other name gets both appended.
-  CHECK(pdt::tetgen_files("a/B.NODE").ele == "a/B.ele");
+  // The named file as named (any case), its partner in upper case if it is;
+  // any other name gets both appended.
+  CHECK(pdt::tetgen_files("a/B.NODE").node == "a/B.NODE");
+  CHECK(pdt::tetgen_files("a/B.NODE").ele == "a/B.ELE");
+  CHECK(pdt::tetgen_files("a/B.Ele").ele == "a/B.Ele");
   CHECK(pdt::tetgen_files("a/B.Ele").node == "a/B.node");
   CHECK(pdt::tetgen_files("m.vtu").node == "m.vtu.node");
+  {
+    pdt::write_tetgen(d.file("UP.NODE"), m);  // read back by the name it was written under
+    CHECK(pdt::read_tetgen(d.file("UP.NODE")).tets == m.tets);
+    CHECK(pdt_test::read_file(d.file("UP.ELE")) == "2 4 0\n0 0 1 2 3\n1 1 2 3 4\n");
+    auto refused = catch_error([&] { pdt::write_tetgen(d.file(".NODE"), m); });
+    REQUIRE(refused);
+    CHECK(refused->code() == pdt::ErrorCode::invalid_argument);
+  }
   // 1-based TetGen files (TetGen's default numbering) read back 0-based.
   write_file(d.file("one.node"), "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n");
   write_file(d.file("one.ele"), "# comment\n1 4 1\n1 1 2 3 4 5.0\n");

@@ -205,7 +205,7 @@ TEST_CASE("refine: bad arguments are refused, naming the rule", "[refine][cli]")
                         Case{"refine --domain torus --size 0", "expected a positive number"},
                         Case{"refine --domain torus --size -1", "expected a positive number"},
                         Case{"refine --domain torus --size 0.1 --ratio 1.5", "at least 2"},
-                        Case{"refine --domain sphere --size 100", "too large for the sphere domain"},
+                        Case{"refine --domain sphere --size 100", "leaves the sphere domain without surface samples"},
                         Case{"refine --domain torus", "needs --size"},
                         Case{"refine --size 0.1", "needs --domain"},
                         Case{"refine --domain torus --size 0.1 --out mesh.stl", "expected a name ending in .vtu"}}) {
@@ -238,10 +238,18 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
     // Far below 512 a coarser look (at 0.8: 4 times the spacing) already
     // estimates over twice the budget and says "more"; close to it, the
     // sampling runs through and gives the count.
-    CHECK(small.out.find("the surface alone needs " + std::string(std::stoul(budget) >= 300 ? "512" : "more") +
-                         " sample points, over the point budget of " + budget) != std::string::npos);
+    const std::string says =
+        std::stoul(budget) >= 300
+            ? "the surface needs 512 sample points; with the box's 8 corners that is 520, over the point budget of "
+            : "the surface needs more sample points than fit the point budget of ";
+    CHECK(small.out.find(says + budget + " (") != std::string::npos);
     CHECK(small.out.find("insertions") == std::string::npos);  // refused before anything was inserted
   }
+  // Samples that fit, but not with the corners: refused, counting them.
+  const Result corners = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 515");
+  CHECK(corners.code == 1);
+  CHECK(corners.out.find("512 sample points; with the box's 8 corners that is 520, over the point budget of 515") !=
+        std::string::npos);
   // Samples that fit, but not with the starting points (17): stopped before
   // the samples go in, below the budget, saying what the step needed.
   const Result samples = run_pdt(d, "refine --domain torus --size 0.2 --threads 2 --budget 528");
@@ -257,16 +265,16 @@ TEST_CASE("refine: a point budget stops it, and says so", "[refine][cli]") {
   CHECK(rest.out.find("the point budget of 700 stopped it: ") != std::string::npos);
   CHECK(rest.out.find(" was hit") == std::string::npos);
   // A size beyond any coarser look (4 times it overflows to infinity):
-  // refused as too large, at once.
+  // refused at once: no sample.
   const Result huge = run_pdt(d, "refine --domain sphere --size 1e308 --threads 1");
   CHECK(huge.code == 2);
-  CHECK(huge.err.find("too large for the sphere domain") != std::string::npos);
+  CHECK(huge.err.find("leaves the sphere domain without surface samples") != std::string::npos);
   // A size whose surface needs millions of samples, under a small budget:
   // the sampling stops early (it took minutes and gigabytes before).
   const Result tiny = run_pdt(d, "refine --domain gyroid --size 1e-3 --threads 2 --budget 100");
   INFO("stdout:\n" << tiny.out);
   CHECK(tiny.code == 1);
-  CHECK(tiny.out.find("the surface alone needs more sample points, over the point budget of 100") != std::string::npos);
+  CHECK(tiny.out.find("the surface needs more sample points than fit the point budget of 100") != std::string::npos);
 }
 
 TEST_CASE("refine: the surface samples' index finds the nearest sample within a radius, as a scan does", "[refine]") {

@@ -94,7 +94,8 @@ std::vector<std::string> mesh_output_files(const std::string& out) {
   // The writers' own rule (write_tetgen, write_vtu), checked before the run.
   const std::string base = out.substr(out.find_last_of('/') + 1);
   const bool vtu = pdt::support::ends_with_nocase(out, ".vtu");
-  if (base.empty() || (!vtu && pdt::tetgen_files(base).node == ".node"))
+  const std::string node = pdt::tetgen_files(base).node;  // ".node" or ".NODE": no name before it
+  if (base.empty() || (!vtu && node.size() == 5 && pdt::support::ends_with_nocase(node, ".node")))
     throw pdt::Error(pdt::ErrorCode::invalid_argument,
                      "--out " + out + ": names no file (give it a name such as mesh.vtu or mesh.node)");
   if (vtu) return {out};
@@ -225,8 +226,10 @@ std::string box_string(const pdt::Box& b) {
 std::FILE* summary_stream() { return summary_file; }
 
 void peak_memory_row(std::uint64_t run_peak, const char* then) {
+  // The peak read again later cannot be lower; the kernel's count can
+  // read a little lower, once some pages moved between its counters.
   row("peak memory", pdt::support::format_megabytes(run_peak) +
-                         (then ? ", " + pdt::support::format_megabytes(pdt::support::peak_rss_bytes()) + then
+                         (then ? ", " + pdt::support::format_megabytes(std::max(run_peak, pdt::support::peak_rss_bytes())) + then
                                : std::string()));
 }
 

@@ -37,10 +37,12 @@ const char* const refine_usage =
     "                  slab in [-1, 1]^3: non-convex, multiply connected)\n"
     "  --size H        the circumradius bound (and about the surface samples' spacing)\n"
     "  --ratio B       the radius-edge bound, at least 2 (default 2)\n"
-    "  --threads N     the engine's workers (default: all cores)\n"
-    "  --seed S        which surface samples are kept (default 1)\n"
+    "  --threads N     the engine's workers (default, and 0: one per core)\n"
+    "  --seed S        which surface samples are kept, and the jitter of the starting lattice\n"
+    "                  (default 1)\n"
     "  --budget N      stop after N points (default 20,000,000); reported when hit, and a surface\n"
-    "                  whose samples alone exceed it is refused before anything is inserted\n"
+    "                  whose samples and the box's 8 corners exceed it is refused before anything\n"
+    "                  is inserted\n"
     "  --out FILE      FILE.vtu: the tetrahedra inside D (centroid inside), with per-cell\n"
     "                  radius_edge_ratio, min_dihedral_angle and domain_label;\n"
     "                  FILE.node: the whole triangulation (TetGen .node + .ele)\n"
@@ -122,7 +124,7 @@ int cmd_refine(Args args) {
     usage_error(refine_usage, "--ratio " + pdt::support::format_double(ratio) +
                                   ": expected at least 2 (below Shewchuk's bound Delaunay refinement need not terminate)");
   if (out && !ends_with_nocase(*out, ".vtu") && !ends_with_nocase(*out, ".node") && !ends_with_nocase(*out, ".ele"))
-    usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK) or .node (TetGen)");
+    usage_error(refine_usage, "--out " + *out + ": expected a name ending in .vtu (VTK), or .node or .ele (TetGen's pair of files)");
   // Before the run, so a typo cannot waste it: every file it will write.
   const std::vector<std::string> out_files = out ? mesh_output_files(*out) : std::vector<std::string>{};
   for (const std::string& f : out_files) require_writable_file("--out", f);
@@ -170,9 +172,15 @@ int cmd_refine(Args args) {
   if (st.samples_over_budget) {
     // Nothing was refined: the surface's samples alone exceed the budget.
     row("domain", o.domain.name + ", size " + pdt::support::format_double(o.size));
-    row("bounds", "unfinished: at this size the surface alone needs " +
-                      (st.surface_samples ? format_count(st.surface_samples) : std::string("more")) +
-                      " sample points, over the point budget of " + format_count(o.budget) + " (raise --budget or --size)");
+    // The corners go in first, and every sample before the end (Refiner::start).
+    row("bounds", "unfinished: " +
+                      (st.surface_samples
+                           ? "at this size the surface needs " + format_count(st.surface_samples) +
+                                 " sample points; with the box's 8 corners that is " +
+                                 format_count(st.surface_samples + 8) + ", over the point budget of "
+                           : std::string("at this size the surface needs more sample points than fit the point "
+                                         "budget of ")) +
+                      format_count(o.budget) + " (raise --budget or --size)");
     std::fflush(summary_stream());
     return 1;  // the trace writer is discarded: an older file of its name stays
   }
@@ -212,8 +220,8 @@ int cmd_refine(Args args) {
     return std::string(b);
   };
   std::snprintf(buf, sizeof buf,
-                "%s degrees smallest inside, %s among the judged; %s slivers under %.0f degrees inside (%s "
-                "judged): the radius-edge bound does not exclude slivers",
+                "%s degrees smallest inside, %s among the judged; %s slivers under %.0f degrees inside, %s "
+                "among the judged: the radius-edge bound does not exclude slivers",
                 degrees(q.inside, q.min_dihedral).c_str(), degrees(q.judged, q.min_dihedral_judged).c_str(),
                 format_count(q.slivers).c_str(), pdt_refine::MeshQuality::sliver_degrees,
                 format_count(q.slivers_judged).c_str());

@@ -403,7 +403,7 @@ int cmd_run(Args args) {
     // Decide before the (possibly long) run, so a typo cannot waste it.
     if (ends_with_nocase(*out, ".node") || ends_with_nocase(*out, ".ele")) out_kind = OutKind::tetgen;
     else if (ends_with_nocase(*out, ".vtu")) out_kind = OutKind::vtu;
-    else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node (TetGen) or .vtu (VTK)");
+    else usage_error(run_usage, "--out " + *out + ": expected a name ending in .node or .ele (TetGen's pair of files) or .vtu (VTK)");
     for (const std::string& f : mesh_output_files(*out)) {
       require_writable_file("--out", f);
       if (same_file(f, *input)) usage_error(run_usage, "--out " + *out + " would overwrite the input " + *input);

@@ -63,8 +63,10 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding =
                std::span<const CellField> cell_fields = {});
 Mesh read_tetgen(const std::string& path);  // reads .node and the .ele beside it
 
-// The two files write_tetgen writes and read_tetgen reads for `path`: a
-// .node or .ele extension (any case) is replaced, else both are appended.
+// The two files write_tetgen writes and read_tetgen reads for `path`: a path
+// ending in .node or .ele (any case) names one of them as it is, and the
+// other gets the other extension, in upper case if the given one is
+// ("m.NODE": "m.ELE"); any other path gets both appended.
 struct TetgenFiles {
   std::string node, ele;
 };

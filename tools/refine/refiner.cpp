@@ -568,8 +568,9 @@ RefineStats refine(pdt::Triangulation& t, const RefineOptions& o) {
   if (!too_many && samples.empty()) {
     char why[256];
     std::snprintf(why, sizeof why,
-                  "the size bound %g is too large for the %s domain: no point of its surface is sampled at that "
-                  "spacing (its box is %g across); give a smaller size",
+                  "the size bound %g leaves the %s domain without surface samples: the sampling lattice of that "
+                  "spacing misses its surface (its box is %g across); give a smaller size (a quarter of the box "
+                  "or less samples every domain)",
                   o.size, o.domain.name.c_str(), extent);
     bad(why);
   }

@@ -276,6 +276,9 @@ void Triangulation::Impl::reserve_cells(OpContext& ctx, std::size_t n) {
     tags.ensure_size(first + size);
     cells.populate(first, first + size);
     tags.populate(first, first + size);  // renew() reads a tag before writing it
+    // Ids whose tags were given back read 0 here: they start at the floor.
+    for (std::size_t i = first; i < std::min(first + size, tag_floor_end); ++i)
+      if (incarnation(static_cast<CellId>(i)) < tag_floor) tags[i].store(tag_floor << 2 | mark_free, std::memory_order_relaxed);
     for (std::size_t i = first; i < first + size; ++i) {
       new (&cells[i]) CellRec();
       cells[i].v[0] = no_vertex;  // not live yet
@@ -359,6 +362,7 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
         v = pop_id<vertex_segment>(ctx.free_vertices, vertex_next());
         break;
       }
+      if (take_released_vertices(ctx)) continue;
       // Fresh records are all-zero (a free vertex) without construction; see
       // StableArray::grow. The small triangulation reuses its memory, and is
       // single-threaded, so it constructs.
@@ -388,6 +392,26 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   ++ctx.d_vertices;
   ctx.last_vertex = v;
   return v;
+}
+
+bool Triangulation::Impl::take_released_vertices(OpContext& ctx) {
+  if (released_vertex_count.load(std::memory_order_relaxed) == 0) return false;
+  std::uint32_t first, count;
+  {
+    std::lock_guard lock(spare_mutex);
+    if (released_vertices.empty()) return false;
+    IdRun& run = released_vertices.back();  // the lowest run (shrink_to_fit)
+    count = std::min(run.count, vertex_chunk);
+    first = run.first;
+    run.first += count;
+    run.count -= count;
+    if (run.count == 0) released_vertices.pop_back();
+    released_vertex_count.fetch_sub(count, std::memory_order_relaxed);
+  }
+  verts.populate(first, first + count);
+  ctx.fresh_vertex = first;
+  ctx.fresh_vertex_end = first + count;
+  return true;
 }
 
 void Triangulation::Impl::free_vertex(OpContext& ctx, VertexId v) {
@@ -446,14 +470,21 @@ void Triangulation::Impl::fold_counters(OpContext& ctx) {
 
 void Triangulation::Impl::clear() {
   // A small (per-removal) triangulation keeps its pages: it is cleared per
-  // operation. The tags keep their contents: cell incarnations go on counting,
-  // and the live cells' ids are marked free (I8), so that no handle from
-  // before names a cell again. (Nobody holds handles to a small one's cells.)
-  if (!is_small)
-    for (CellId c = 0; c < cells.size(); ++c)
-      if (cell_alive(c)) set_mark(c, mark_free);
+  // operation. Cell incarnations go on counting: the tags' pages go back to
+  // the OS, and the next cell of every id starts past the highest
+  // incarnation they held (tag_floor), so that no handle from before names a
+  // cell again. (Nobody holds handles to a small one's cells: its tags stay.)
+  if (!is_small) {
+    for (CellId c = 0; c < cells.size(); ++c) tag_floor = std::max(tag_floor, incarnation(c));
+    tag_floor_end = std::max(tag_floor_end, cells.size());
+  }
   cells.clear(!is_small);
-  tags.clear(false);
+  tags.clear(!is_small);
+  {
+    std::lock_guard lock(spare_mutex);
+    released_vertices.clear();
+    released_vertex_count.store(0, std::memory_order_relaxed);
+  }
   verts.clear(!is_small);
   verts.grow(1);
   verts[0].multiplicity = 1;

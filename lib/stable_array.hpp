@@ -19,7 +19,8 @@
 // Invariant: size() <= capacity(); elements [0, size()) were constructed by
 // grow(). ensure_size() extends the size without constructing: its users
 // (the cell marks) never read an element before writing it. clear(false)
-// keeps the memory, and its old contents, for reuse.
+// keeps the memory, and its old contents, for reuse; truncate() and zero()
+// leave what they drop all-zero, as fresh memory.
 // T must be trivially destructible (storage is released without destructors).
 #include <sys/mman.h>
 
@@ -38,6 +39,25 @@
 #endif
 
 namespace pdt::detail {
+
+// Makes [p, p + bytes) all-zero: the whole pages inside it go back to the OS
+// (they read as zero when touched again), the bytes on the pages it shares
+// with its neighbours are cleared in place. Where the OS refuses the advice
+// (a huge-page mapping), the pages are cleared in place too.
+inline void zero_and_release(void* p, std::size_t bytes) {
+  if (bytes == 0) return;
+  constexpr std::uintptr_t page = 4096;
+  const auto from = reinterpret_cast<std::uintptr_t>(p), to = from + bytes;
+  const std::uintptr_t inner_from = (from + page - 1) & ~(page - 1), inner_to = to & ~(page - 1);
+  if (inner_from >= inner_to) {
+    std::memset(p, 0, bytes);
+    return;
+  }
+  std::memset(p, 0, inner_from - from);
+  std::memset(reinterpret_cast<void*>(inner_to), 0, to - inner_to);
+  if (::madvise(reinterpret_cast<void*>(inner_from), inner_to - inner_from, MADV_DONTNEED) != 0)
+    std::memset(reinterpret_cast<void*>(inner_from), 0, inner_to - inner_from);
+}
 
 #ifndef PDT_USE_MIMALLOC
 
@@ -120,6 +140,20 @@ class StableArray {
     std::size_t cur = size_.load(std::memory_order_acquire);
     while (cur < n && !size_.compare_exchange_weak(cur, n, std::memory_order_acq_rel)) {
     }
+  }
+  // Elements [from, to) (below size()) become all-zero, as fresh memory
+  // reads, their whole pages returned to the OS. Nothing else may touch them
+  // meanwhile.
+  void zero(std::size_t from, std::size_t to) { zero_and_release(data_ + from, (to - from) * sizeof(T)); }
+  // Drops the elements from n on (n <= size()): zero(n, size()), then the
+  // size is n, so that growing again finds fresh memory. Single-threaded:
+  // nothing else may use the array meanwhile.
+  void truncate(std::size_t n) {
+    const std::size_t old = size();
+    if (n >= old) return;
+    zero(n, old);
+    size_.store(n, std::memory_order_release);
+    kept_ = std::min(kept_, n);
   }
   // Forgets every element; with release, also returns the committed pages to
   // the OS (without, a scratch array reused per operation keeps its pages warm,
@@ -209,6 +243,24 @@ class StableArray {
     if (release) release_chunks();
   }
   void populate(std::size_t, std::size_t) {}  // mimalloc's chunks: its own choice
+  // As in the pool build: the pages inside each chunk's part go back to the
+  // OS; truncate also frees the chunks wholly past n.
+  void zero(std::size_t from, std::size_t to) {
+    while (from < to) {
+      const std::size_t end = std::min(to, ((from >> chunk_bits) + 1) << chunk_bits);
+      zero_and_release(&(*this)[from], (end - from) * sizeof(T));
+      from = end;
+    }
+  }
+  void truncate(std::size_t n) {
+    const std::size_t old = size();
+    if (n >= old) return;
+    const std::size_t kept_chunks = (n + chunk_elems - 1) >> chunk_bits;
+    zero(n, std::min(old, kept_chunks << chunk_bits));
+    for (std::size_t c = kept_chunks; c < table_size_; ++c)
+      if (T* p = table_[c].exchange(nullptr, std::memory_order_relaxed)) mi_free(p);
+    size_.store(n, std::memory_order_release);
+  }
 
  private:
   std::size_t table_bytes() const { return table_size_ * sizeof(std::atomic<T*>); }

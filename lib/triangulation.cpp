@@ -174,6 +174,11 @@ void Triangulation::clear() {
   impl_->clear();
 }
 
+void Triangulation::shrink_to_fit() {
+  require_detached(*impl_, "shrink_to_fit");
+  impl_->shrink_to_fit();
+}
+
 void Triangulation::set_change_hook(ChangeHook hook, bool report_destroyed) {
   require_detached(*impl_, "set_change_hook");
   Impl& m = *impl_;
@@ -301,7 +306,8 @@ const TriangulationStats& Triangulation::stats() const { return impl_->seq->stat
 std::size_t Triangulation::memory_bytes() const {
   const Impl& m = *impl_;
   return m.cells.size() * (sizeof(detail::CellRec) + sizeof(std::uint32_t)) +  // records and tags
-         m.verts.size() * sizeof(detail::VertexRec) + m.grid.bytes();
+         (m.verts.size() - m.released_vertex_count.load(std::memory_order_relaxed)) * sizeof(detail::VertexRec) +
+         m.grid.bytes();
 }
 
 }  // namespace pdt

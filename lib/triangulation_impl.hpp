@@ -10,11 +10,13 @@
 //   removal.cpp      the hole, its link triangulation, sewing it in
 //   flat_state.cpp   dimension < 3, the first tetrahedron, dropping back
 //   validate.cpp     every invariant below, checked
+//   shrink.cpp       shrink_to_fit: live cells moved down, freed storage given back
 //
 // Storage (see storage.hpp for the record encodings):
 //   cells[c], verts[v] index-based, in StableArrays, so ids never move.
 //   tags[c]   incarnation << 2 | mark. The incarnation counts the allocations
-//             of id c over the triangulation's whole life (clear() keeps it),
+//             of id c over the triangulation's whole life (clear() and
+//             shrink_to_fit() give tags back but keep tag_floor above them),
 //             so (c, incarnation) names one cell ever: an id whose cell dies
 //             at retire_at (2^30 - 2) or later is retired (never reused: one
 //             id per 2^30 allocations of it), so the 30-bit count never
@@ -159,6 +161,21 @@ struct Triangulation::Impl {
   // such ids in the ranges it carves; clear() keeps incarnations).
   std::atomic<bool> some_id_retiring{false};
   detail::SpareSegments spare_cells, spare_vertices;
+  // Vertex ids whose records shrink_to_fit() gave back to the OS (all-zero,
+  // on no free list): taken as fresh ranges, vertex_chunk ids at a time,
+  // before the array grows. Under spare_mutex; released_vertex_count is its
+  // total, read without the mutex to skip it when there is none.
+  struct IdRun {
+    std::uint32_t first, count;
+  };
+  std::vector<IdRun> released_vertices;
+  std::atomic<std::size_t> released_vertex_count{0};
+  // Cell ids below tag_floor_end whose tags were given back (shrink_to_fit,
+  // clear()) held incarnations up to tag_floor: reserve_cells starts such an
+  // id there, so that its next cell is a newer incarnation than any handle to
+  // the id names. Written only while no engine is attached.
+  std::uint32_t tag_floor = 0;
+  std::size_t tag_floor_end = 0;
   std::atomic<VertexId> recent_vertex{no_vertex};  // some recently inserted vertex (a walk start)
   ChangeHook hook;                 // Triangulation::set_change_hook's, for seq
   bool report_destroyed = false;
@@ -240,6 +257,10 @@ struct Triangulation::Impl {
   // no chunk from the shared arrays). Throws std::bad_alloc, changing nothing.
   void reserve_cells(OpContext& ctx, std::size_t n);
   void free_all_cells(OpContext& ctx);  // every live cell (the world is stopped)
+  // A range of released vertex ids as ctx's fresh range; false if none.
+  bool take_released_vertices(OpContext& ctx);
+  // Triangulation::shrink_to_fit (shrink.cpp): single-threaded, no engine.
+  void shrink_to_fit();
   VertexId alloc_vertex(OpContext& ctx, const KPoint& p);
   void free_vertex(OpContext& ctx, VertexId v);
   // Gives a context's pooled ids back to another context (engine shutdown).

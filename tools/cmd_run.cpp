@@ -50,6 +50,8 @@ const char* const run_usage =
     "  --out FILE      write the final mesh: FILE.node (TetGen .node + .ele) or FILE.vtu\n"
     "                  (VTK, binary, zlib-compressed; --vtu-ascii for text)\n"
     "  --vtu-ascii     write .vtu as ASCII text\n"
+    "  --shrink        after the replay, give the storage of freed cells and vertices back\n"
+    "                  (Triangulation::shrink_to_fit) and report the memory before and after\n"
     "  --validate      check every invariant of the final triangulation (exit 1 if broken)\n";
 
 namespace {
@@ -365,7 +367,7 @@ void print_engine_stats(const ReplayStats& st) {
 int cmd_run(Args args) {
   std::optional<std::string> input, out;
   unsigned workers = 0;  // 0: the sequential kernel
-  bool validate = false, in_order = false, vtu_ascii = false;
+  bool validate = false, in_order = false, vtu_ascii = false, shrink = false;
   std::uint64_t in_flight = 0;
   while (!args.done()) {
     if (is_help(args.peek())) {
@@ -385,6 +387,8 @@ int cmd_run(Args args) {
       vtu_ascii = true;
     } else if (args.option("--validate", false)) {
       validate = true;
+    } else if (args.option("--shrink", false)) {
+      shrink = true;
     } else if (args.peek().size() > 1 && args.peek()[0] == '-') {
       usage_error(run_usage, "unknown option '" + args.peek() + "' for 'run'");
     } else if (input) {
@@ -479,6 +483,18 @@ int cmd_run(Args args) {
   const std::uint64_t peak = pdt::support::peak_rss_bytes();
   if (st.engine) print_engine_stats(st);
 
+  if (shrink) {  // before validate, which reads every vertex record
+    const std::size_t bytes = t.memory_bytes();
+    const std::uint64_t resident = pdt::support::current_rss_bytes();
+    pdt::support::Stopwatch ssw;
+    t.shrink_to_fit();
+    const double seconds = ssw.seconds();
+    row("shrink", "the mesh " + pdt::support::format_megabytes(bytes) + " -> " +
+                      pdt::support::format_megabytes(t.memory_bytes()) + " (memory_bytes), resident " +
+                      pdt::support::format_megabytes(resident) + " -> " +
+                      pdt::support::format_megabytes(pdt::support::current_rss_bytes()) + ", in " +
+                      format_seconds(seconds));
+  }
   int status = 0;
   if (validate) {
     pdt::support::Stopwatch vsw;

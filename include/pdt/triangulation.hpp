@@ -152,6 +152,19 @@ class Triangulation {
   // Empties the triangulation: every cell and vertex dies without a change
   // report; handles from before read as dead; the id bounds start again.
   void clear();
+  // Gives back to the system the storage of freed cells and vertices. Freed
+  // ids are reused by later insertions, so storage keeps the size of the
+  // largest mesh held so far: 1M vertices removed down to the last 10k
+  // inserted keep about 290 MB until this call, then about 3 MB. Vertex ids
+  // never move, so a page of vertex records that still holds a live one
+  // stays: the same 1M down to 10k chosen at random keep about 38 MB. Time
+  // and memory traffic in proportion to that largest size. The triangulation is the same; every
+  // VertexId and VertexHandle stays valid; live cells may move to lower ids,
+  // and a CellHandle to a moved cell reads as dead afterwards (one to a cell
+  // that stayed still names it). Not a change: the change hook is not called.
+  // Throws only to refuse a call while an engine is attached or from the
+  // change hook (pdt::Error, invalid_argument).
+  void shrink_to_fit();
   // Calls hook inside every later insert/remove that creates or deletes a
   // vertex (see changes.hpp), with the cells it created, and with those it
   // destroyed when report_destroyed. An empty hook turns reporting off.

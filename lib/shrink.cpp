@@ -54,7 +54,8 @@ void Triangulation::Impl::shrink_to_fit() {
   const std::size_t old_cells = cells.size();
   // A free id may take a cell unless it is retired (free_cell).
   auto takes_a_cell = [&](CellId c) { return !cell_alive(c) && incarnation(c) < retire_at; };
-  // Invariant of the loop: every live cell at an id >= hi moved below lo.
+  // Invariant of the loop: no live cell lies at an id >= hi (each moved below
+  // lo), and every id below lo holds a live cell or is retired.
   CellId lo = 0, hi = static_cast<CellId>(old_cells);  // [hi, old_cells) holds no live cell
   for (;;) {
     while (lo < hi && !takes_a_cell(lo)) ++lo;
@@ -76,13 +77,14 @@ void Triangulation::Impl::shrink_to_fit() {
       assert(c < kept || (!cell_alive(c) && cells[c].n[0] < kept));  // only moved cells lie past the cut
       return c < kept ? c : cells[c].n[0];
     };
+    // Each live vertex through the cells it is in: the records of vertices
+    // given back before are not read (see the jump grid below).
     for (CellId c = 0; c < kept; ++c) {
       if (!cell_alive(c)) continue;
       for (std::uint32_t& n : cells[c].n) n = 4 * moved_to(n >> 2) + (n & 3);
+      for (VertexId w : cells[c].v)
+        if (w != 0 && verts[w].cell >= kept) verts[w].cell = moved_to(verts[w].cell);
     }
-    if (dim.load(std::memory_order_relaxed) == 3)
-      for (VertexId v = 1; v < verts.size(); ++v)
-        if (verts[v].multiplicity > 0) verts[v].cell = moved_to(verts[v].cell);
     for (std::size_t c = kept; c < old_cells; ++c) tag_floor = std::max(tag_floor, incarnation(static_cast<CellId>(c)));
     tag_floor_end = std::max(tag_floor_end, old_cells);
     cells.truncate(kept);

@@ -158,7 +158,8 @@ struct Triangulation::Impl {
   // the work moves between the engine's workers.
   std::mutex spare_mutex;
   // Some cell id has reached retire_at (then reserve_cells looks for
-  // such ids in the ranges it carves; clear() keeps incarnations).
+  // such ids in the ranges it carves; clear() and shrink_to_fit() keep
+  // incarnations counting, above tag_floor for the tags they give back).
   std::atomic<bool> some_id_retiring{false};
   detail::SpareSegments spare_cells, spare_vertices;
   // Vertex ids whose records shrink_to_fit() gave back to the OS (all-zero,

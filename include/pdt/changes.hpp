@@ -14,8 +14,9 @@
 // incarnation is counted per id and triangulation, so a CellHandle also names
 // its triangulation's storage (CellHandle::mesh): it reads as dead in any
 // other triangulation, and after `t = Triangulation()` or `t = std::move(u)`
-// (where u's handles now name t's cells); clear() keeps the counts, so its
-// handles from before read as dead there.
+// (where u's handles now name t's cells); clear() and shrink_to_fit() keep
+// the counts going, so handles from before clear() read as dead, as do those
+// of the cells shrink_to_fit() moved, also once their ids are reused.
 //
 // Keeping data per cell or vertex. Key it by id, and store the incarnation
 // beside it: an entry whose incarnation differs from the handle's is stale.

@@ -74,18 +74,21 @@ EngineState::EngineState(Triangulation& t, const Box& d, EngineOptions o, unsign
     }
   };
   // The triangulation's own grid serves while it was built for at least half
-  // of the live vertices (the kernel keeps it so): rebuilding it for every
+  // of the live vertices and at most four times them (the kernel keeps it
+  // so, growing and shrinking; an earlier engine may not have): rebuilding it for every
   // engine made each one cost time in proportion to the mesh, so that many
   // short-lived engines on a large mesh spent most of their time here. Else
   // built now, while grid_growth still says kernel: a tree that follows the
   // vertices there are (the engine's own rebuilds use equal slots, cut again
   // where crowded).
-  if (impl.grid.slot_count != 0 && 2 * impl.grid.built_for >= static_cast<std::size_t>(impl.n_vertices.load())) {
-    grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);
+  const auto live = static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()));
+  if (impl.grid.slot_count != 0 && 2 * impl.grid.built_for >= live && !impl.grid.shrunk_since_build(live)) {
+    grid_grow_at.store(2 * impl.vertex_ids_in_use() + 1024, std::memory_order_relaxed);
     grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
-    grid_may_grow.store(impl.verts.size() / 2 < std::max<std::size_t>(opts.grid_slots, 1), std::memory_order_relaxed);
+    grid_may_grow.store(impl.vertex_ids_in_use() / 2 < std::max<std::size_t>(opts.grid_slots, 1),
+                        std::memory_order_relaxed);
   } else {
-    ensure_grid();  // built aside: a failure leaves the old grid
+    ensure_grid(false, false, impl.grid.shrunk_since_build(live));  // built aside: a failure leaves the old grid
   }
   bodies.reserve(nworkers);
   for (auto& w : workers) {

@@ -551,23 +551,27 @@ bool EngineState::idle_everywhere() const { return in_flight() == 0; }
 // ---------------------------------------------------------------------------
 // The jump grid's growth, with the world stopped
 // ---------------------------------------------------------------------------
-void EngineState::ensure_grid(bool parallel, bool follow) {
+void EngineState::ensure_grid(bool parallel, bool follow, bool shrunk) {
   if (impl.dim.load() < 3) return;  // no grid below dimension 3
-  const std::size_t ids = impl.verts.size();
-  if (follow) {
-    if (!impl.grid.grown_since_build(static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()))))
-      return;  // another worker's rebuild came first
+  const std::size_t ids = impl.vertex_ids_in_use();  // not the id bound: shrink_to_fit may have given ids back
+  const auto live = static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()));
+  if (shrunk) {
+    if (!impl.grid.shrunk_since_build(live)) return;  // another worker's rebuild came first
+  } else if (follow) {
+    if (!impl.grid.grown_since_build(live)) return;  // another worker's rebuild came first
   } else if (impl.grid.slot_count && ids < grid_grow_at.load(std::memory_order_relaxed)) {
     return;
   }
-  // Over the live vertices' bounding box, about two vertices per slot.
+  // Over the live vertices' bounding box, about two vertices per slot: the
+  // ids handed out stand for them as the mesh grows (the live count lags
+  // while workers hold deltas), the live count once removals shrank it.
   const std::size_t most = std::max<std::size_t>(opts.grid_slots, 1);
-  const std::size_t slots = std::clamp<std::size_t>(ids / 2, 1, most);
+  const std::size_t slots = std::clamp<std::size_t>((shrunk ? live : ids) / 2, 1, most);
   impl.grid_rebuild(slots, parallel, most, grid_follows || follow);
   if (follow) grid_follows = true;  // after the rebuild: a failed one changes nothing
   grid_grow_at.store(2 * ids + 1024, std::memory_order_relaxed);
   grid_built_for.store(impl.grid.built_for, std::memory_order_relaxed);
-  if (!follow) grid_doublings.fetch_add(1, std::memory_order_relaxed);  // re-arms the workers' watches
+  if (!follow || shrunk) grid_doublings.fetch_add(1, std::memory_order_relaxed);  // re-arms the workers' watches
   // A grid at the cap may not get finer: walks long then are not its age.
   grid_may_grow.store(slots < most, std::memory_order_relaxed);
 }
@@ -576,23 +580,30 @@ void EngineState::maybe_grow_grid(Worker& w) {
   // Below dimension 3 there is no grid; the global step that builds the
   // tetrahedra sizes it (run_global calls ensure_grid).
   if (impl.dim.load(std::memory_order_relaxed) < 3) return;
-  const bool grow = impl.verts.size() >= grid_grow_at.load(std::memory_order_relaxed);
+  const bool grow = impl.vertex_ids_in_use() >= grid_grow_at.load(std::memory_order_relaxed);
   // Only atomics here: outside the stopped world, another worker may be
   // replacing the grid.
   const std::uint32_t doublings = grid_doublings.load(std::memory_order_relaxed);
   if (w.walks_doublings != doublings) w.walks.rearm(), w.walks_doublings = doublings;
-  const bool follow = !grow && grid_may_grow.load(std::memory_order_relaxed) &&
-                      JumpGrid::grown_since(grid_built_for.load(std::memory_order_relaxed),
-                                            static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()))) &&
+  const auto live = static_cast<std::size_t>(std::max<std::int64_t>(0, impl.n_vertices.load()));
+  const std::size_t built_for = grid_built_for.load(std::memory_order_relaxed);
+  // Removals left a quarter of the vertices the grid was built for: its
+  // slots name mostly dead vertices (Impl::grid_note_removal says why).
+  const bool shrunk = !grow && JumpGrid::shrunk_since(built_for, live);
+  const bool follow = !grow && !shrunk && grid_may_grow.load(std::memory_order_relaxed) &&
+                      JumpGrid::grown_since(built_for, live) &&
                       w.walks.long_walks(w.ctx->stats.walk_steps, w.ctx->stats.insertions);
-  if (!grow && !follow) return;
+  if (!grow && !follow && !shrunk) return;
   std::unique_lock<std::mutex> lock;
   if (!world.try_stop(w.index, lock)) return;  // another worker is in a global step; it checks too
   try {
-    ensure_grid(true, follow);  // on this worker's thread and the suspended workers' (their threads are free)
+    ensure_grid(true, follow, shrunk);  // on this worker's thread and the suspended workers' (their threads are free)
   } catch (const std::bad_alloc&) {
-    // The old grid stays (it was built aside); walks are longer, nothing is wrong.
-    grid_grow_at.store(2 * impl.verts.size() + 1024, std::memory_order_relaxed);
+    // The old grid stays (it was built aside); walks are longer, nothing is
+    // wrong. Not tried again until the ids double or the live count moves
+    // a quarter from here.
+    grid_grow_at.store(2 * impl.vertex_ids_in_use() + 1024, std::memory_order_relaxed);
+    grid_built_for.store(live, std::memory_order_relaxed);
   }
   world.restart(lock, [this](std::coroutine_handle<> h) { spawn(h); });
 }

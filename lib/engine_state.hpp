@@ -368,7 +368,7 @@ struct EngineState {
   // With the world stopped (parallel: in the arena, whose other workers are
   // suspended), or before workers run.
   // follow: now, and cut where crowded from now on (a worker's walks stayed long).
-  void ensure_grid(bool parallel = false, bool follow = false);
+  void ensure_grid(bool parallel = false, bool follow = false, bool shrunk = false);
   void maybe_grow_grid(Worker& w);
 };
 

@@ -191,7 +191,10 @@ void Triangulation::Impl::drop_to_flat(OpContext& ctx, VertexId v) {
   // Cells go back to this context's pool (other pools' free lists stay valid).
   // Room for the flat list first: past it nothing may fail.
   std::size_t survivors = 0, live_cells = 0;
-  for (VertexId w = 1; w < verts.size(); ++w) survivors += w != v && verts[w].multiplicity > 0;
+  const std::vector<detail::IdRange> released = released_ranges();  // all free: not read
+  detail::for_each_kept(1, verts.size(), released, [&](std::size_t from, std::size_t to) {
+    for (std::size_t w = from; w < to; ++w) survivors += w != v && verts[w].multiplicity > 0;
+  });
   for (CellId c = 0; c < cells.size(); ++c) live_cells += cell_alive(c);
   PDT_FAULT_POINT("flat list");
   flat.clear();
@@ -202,12 +205,14 @@ void Triangulation::Impl::drop_to_flat(OpContext& ctx, VertexId v) {
   free_all_cells(ctx);
   free_vertex(ctx, v);
   grid = detail::JumpGrid{};
-  for (VertexId w = 1; w < verts.size(); ++w) {
-    if (verts[w].multiplicity == 0) continue;
-    verts[w].cell = static_cast<CellId>(flat.size());
-    flat.push_back(w);
-    flat_index.insert(w, verts);
-  }
+  detail::for_each_kept(1, verts.size(), released, [&](std::size_t from, std::size_t to) {
+    for (auto w = static_cast<VertexId>(from); w < to; ++w) {
+      if (verts[w].multiplicity == 0) continue;
+      verts[w].cell = static_cast<CellId>(flat.size());
+      flat.push_back(w);
+      flat_index.insert(w, verts);
+    }
+  });
   recompute_basis();
   ctx.last_vertex = flat.empty() ? no_vertex : flat.back();
   recent_vertex.store(no_vertex, std::memory_order_relaxed);

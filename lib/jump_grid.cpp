@@ -111,7 +111,24 @@ bool JumpGrid::check() const {
   return leaf_slots == slot_count;  // none twice, none outside: all of them
 }
 
-JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots) {
+namespace {
+
+// Calls body(v) for each live vertex id v in [1, verts.size()) outside
+// `skip`, in pieces on the current arena's threads when parallel (for_range).
+template <class Body>
+void each_live_vertex(const StableArray<VertexRec>& verts, std::span<const IdRange> skip, bool parallel,
+                      const Body& body) {
+  for_range(verts.size(), parallel, [&](std::size_t begin, std::size_t end) {
+    for_each_kept(std::max<std::size_t>(begin, 1), end, skip, [&](std::size_t from, std::size_t to) {
+      for (std::size_t v = from; v < to; ++v)
+        if (verts[v].multiplicity > 0) body(static_cast<VertexId>(v));
+    });
+  });
+}
+
+}  // namespace
+
+JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots, std::span<const IdRange> skip) {
   BoundingBox box;
   const std::size_t bound = verts.size();
   // The build's scratch is mapped for it and unmapped after it (StableArray),
@@ -131,12 +148,11 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
   std::vector<std::uint32_t> offsets;
   ids.grow(bound, false);
   std::size_t n = 0;
-  for (VertexId v = 1; v < bound; ++v) {
-    if (verts[v].multiplicity == 0) continue;
+  each_live_vertex(verts, skip, false, [&](VertexId v) {
     ids[n++] = v;
     const KPoint& p = verts[v].p;
     box.add(p.x(), p.y(), p.z());
-  }
+  });
   const std::size_t want = slots_wanted(slots, n);
   // About `per_slot` vertices per slot, 2 unless the cap asks for more: few
   // slots are empty right after a build. Raised until the slots fit the cap.
@@ -222,8 +238,7 @@ JumpGrid JumpGrid::build(const StableArray<VertexRec>& verts, std::size_t slots)
     g.slot_count = total;
     g.slots = std::make_unique<std::atomic<VertexId>[]>(g.slot_count);
     for (std::size_t s = 0; s < g.slot_count; ++s) g.set(s, no_vertex);
-    for (VertexId v = 1; v < bound; ++v)
-      if (verts[v].multiplicity > 0) g.set(g.slot_of(verts[v].p), v);
+    each_live_vertex(verts, skip, false, [&](VertexId v) { g.set(g.slot_of(verts[v].p), v); });
     g.built_for = n;
     assert(g.check());
     return g;
@@ -238,16 +253,18 @@ struct Extent {
   BoundingBox box;
   std::size_t n = 0;
 };
-Extent live_extent(const StableArray<VertexRec>& verts, bool parallel) {
+Extent live_extent(const StableArray<VertexRec>& verts, std::span<const IdRange> skip, bool parallel) {
   const std::size_t bound = verts.size();
   auto extent_of = [&](std::size_t begin, std::size_t end) {
     Extent e;
-    for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
-      if (verts[v].multiplicity == 0) continue;
-      ++e.n;
-      const KPoint& p = verts[v].p;
-      e.box.add(p.x(), p.y(), p.z());
-    }
+    for_each_kept(std::max<std::size_t>(begin, 1), end, skip, [&](std::size_t from, std::size_t to) {
+      for (std::size_t v = from; v < to; ++v) {
+        if (verts[v].multiplicity == 0) continue;
+        ++e.n;
+        const KPoint& p = verts[v].p;
+        e.box.add(p.x(), p.y(), p.z());
+      }
+    });
     return e;
   };
   auto join = [](Extent a, const Extent& b) {
@@ -296,11 +313,11 @@ void allocate_empty_slots(JumpGrid& g, bool parallel) {
 
 }  // namespace
 
-JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel) {
-  const std::size_t bound = verts.size();
+JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel,
+                               std::span<const IdRange> skip) {
   JumpGrid g;
   auto run = [&] {
-    const Extent e = live_extent(verts, parallel);
+    const Extent e = live_extent(verts, skip, parallel);
     const std::size_t want = slots_wanted(slots, e.n);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
     const auto k = static_cast<std::uint32_t>(g.lattice.res);
@@ -314,13 +331,10 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
     // it, as in build).
     StableArray<std::uint32_t> counts(g.slot_count);
     counts.grow(g.slot_count, false);  // zeros
-    for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
-        if (verts[v].multiplicity == 0) continue;
-        const std::size_t s = g.slot_of(verts[v].p);
-        keep_largest(g.slots[s], static_cast<VertexId>(v), parallel);
-        count_one(counts[s], parallel);
-      }
+    each_live_vertex(verts, skip, parallel, [&](VertexId v) {
+      const std::size_t s = g.slot_of(verts[v].p);
+      keep_largest(g.slots[s], v, parallel);
+      count_one(counts[s], parallel);
     });
     // Crowded: 8 times the mean load, and more than crowded_slot (a grid at
     // its cap holds more than 2 vertices per slot everywhere).
@@ -343,11 +357,11 @@ JumpGrid JumpGrid::build_equal(const StableArray<VertexRec>& verts, std::size_t 
 }
 
 JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t slots, std::size_t most,
-                               bool parallel) {
+                               bool parallel, std::span<const IdRange> skip) {
   const std::size_t bound = verts.size();
   JumpGrid g;
   auto run = [&] {
-    const Extent e = live_extent(verts, parallel);
+    const Extent e = live_extent(verts, skip, parallel);
     const std::size_t want = slots_wanted(slots, e.n);
     const std::size_t limit = std::min<std::size_t>(std::max(want, most), std::size_t{1} << 30);
     g.lattice = BoxLattice(e.box.lo, e.box.hi, std::max(1, static_cast<int>(std::cbrt(static_cast<double>(want)))));
@@ -392,14 +406,11 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
     for (;;) {
       // Each vertex whose leaf was cut (or that has none yet) finds its new
       // leaf, which counts it.
-      for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
-          if (verts[v].multiplicity == 0) continue;
-          if (leaf_of[v] != 0 && nodes[leaf_of[v]].leaf()) continue;
-          const std::uint32_t at = leaf_node(verts[v].p);
-          leaf_of[v] = at;
-          count_one(count[at], parallel);
-        }
+      each_live_vertex(verts, skip, parallel, [&](VertexId v) {
+        if (leaf_of[v] != 0 && nodes[leaf_of[v]].leaf()) return;
+        const std::uint32_t at = leaf_node(verts[v].p);
+        leaf_of[v] = at;
+        count_one(count[at], parallel);
       });
       // Cut the last round's crowded leaves, in node order, while the slots
       // fit the limit.
@@ -433,12 +444,8 @@ JumpGrid JumpGrid::build_split(const StableArray<VertexRec>& verts, std::size_t 
     g.slot_count = slot_total;
     allocate_empty_slots(g, parallel);
     // Each slot keeps its largest id, as in build_equal.
-    for_range(bound, parallel, [&](std::size_t begin, std::size_t end) {
-      for (std::size_t v = std::max<std::size_t>(begin, 1); v < end; ++v) {
-        if (verts[v].multiplicity == 0) continue;
-        keep_largest(g.slots[nodes[leaf_of[v]].first], static_cast<VertexId>(v), parallel);
-      }
-    });
+    each_live_vertex(verts, skip, parallel,
+                     [&](VertexId v) { keep_largest(g.slots[nodes[leaf_of[v]].first], v, parallel); });
     g.built_for = e.n;
     assert(g.check());
   };

@@ -38,6 +38,7 @@
 #include <memory>
 
 #include "box_lattice.hpp"
+#include "id_ranges.hpp"
 #include "stable_array.hpp"
 #include "storage.hpp"
 
@@ -120,8 +121,11 @@ struct JumpGrid {
   // A grid over the live vertices of verts (ids 1..), with at most `slots`
   // slots when given (and about that many when the vertices are spread
   // evenly), else about 2 vertices per slot. Counts the vertices itself (the
-  // triangulation's totals lag while engine workers hold deltas).
-  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0);
+  // triangulation's totals lag while engine workers hold deltas). The ids in
+  // `skip` are not read (all free: Impl::released_ranges), here and in
+  // build_equal and build_split.
+  static JumpGrid build(const StableArray<VertexRec>& verts, std::size_t slots = 0,
+                        std::span<const IdRange> skip = {});
   // One level of equal slots over the same box, as many as fit in `slots`
   // (about n / 2 when 0): for the engine, whose workers fill the domain
   // block by block, so that the vertices at a rebuild say little about where
@@ -130,7 +134,8 @@ struct JumpGrid {
   // would. parallel: in the current TBB arena, isolated (the engine builds it
   // with the world stopped, its other workers suspended and their threads
   // free); the same grid either way.
-  static JumpGrid build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel);
+  static JumpGrid build_equal(const StableArray<VertexRec>& verts, std::size_t slots, bool parallel,
+                              std::span<const IdRange> skip = {});
   // For an engine whose equal slots are crowded (a cluster): the same equal
   // slots as build_equal's, each a leaf of one slot, and then, round after
   // round, each leaf made in the last round that holds more than split_slot
@@ -142,7 +147,8 @@ struct JumpGrid {
   // build_equal's time per level the clusters need, where build's tree is
   // built on one thread; the same grid either way.
   static constexpr std::uint32_t split_slot = 8;
-  static JumpGrid build_split(const StableArray<VertexRec>& verts, std::size_t slots, std::size_t most, bool parallel);
+  static JumpGrid build_split(const StableArray<VertexRec>& verts, std::size_t slots, std::size_t most, bool parallel,
+                              std::span<const IdRange> skip = {});
   // Bytes it holds.
   std::size_t bytes() const { return slot_count * sizeof(VertexId) + node_count * sizeof(Node); }
   // Whether a rebuild before the vertex count doubles may pay (WalkWatch):
@@ -151,6 +157,15 @@ struct JumpGrid {
     return live >= built_for + std::max<std::size_t>(1024, built_for / 4);
   }
   bool grown_since_build(std::size_t live) const { return slot_count != 0 && grown_since(built_for, live); }
+  // Whether the slots have come to name mostly dead vertices (removals): the
+  // live vertices a quarter of those it was built for, and it was built for
+  // more than a few (a rebuild for a small mesh costs as much as the slots
+  // save).
+  static bool shrunk_since(std::size_t built_for, std::size_t live) {
+    return built_for >= min_shrunk_rebuild && 4 * live < built_for;
+  }
+  static constexpr std::size_t min_shrunk_rebuild = 4096;
+  bool shrunk_since_build(std::size_t live) const { return slot_count != 0 && shrunk_since(built_for, live); }
 
   // The encoding's invariant (above), and depth <= max_depth.
   bool check() const;

@@ -393,14 +393,15 @@ void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding, 
 }
 
 void write_tetgen(const std::string& path, const Triangulation& t) {
-  // Straight from the triangulation: no copy of the mesh.
+  // Straight from the triangulation: no copy of the mesh, only its vertex
+  // ids (vertices(), which skips the ids shrink_to_fit gave back).
+  const std::vector<VertexId> ids = t.vertices();
   std::vector<std::uint32_t> node_of(t.vertex_id_bound(), 0xFFFFFFFFu);
   write_tetgen_files(
-      path, t.number_of_vertices(),
+      path, ids.size(),
       [&](auto emit) {
         std::uint32_t next = 0;
-        for (VertexId v = 1; v < t.vertex_id_bound(); ++v) {
-          if (!t.is_vertex(v)) continue;
+        for (VertexId v : ids) {
           node_of[v] = next++;
           emit(t.point(v));
         }

@@ -394,6 +394,19 @@ VertexId Triangulation::Impl::alloc_vertex(OpContext& ctx, const KPoint& p) {
   return v;
 }
 
+std::vector<detail::IdRange> Triangulation::Impl::released_ranges() const {
+  std::vector<detail::IdRange> out;
+  if (released_vertex_count.load(std::memory_order_relaxed) == 0) return out;
+  {
+    std::lock_guard lock(spare_mutex);
+    out.reserve(released_vertices.size());
+    for (const IdRun& run : released_vertices)
+      if (run.count != 0) out.push_back({run.first, run.first + run.count});
+  }
+  std::sort(out.begin(), out.end(), [](detail::IdRange a, detail::IdRange b) { return a.first < b.first; });
+  return out;
+}
+
 bool Triangulation::Impl::take_released_vertices(OpContext& ctx) {
   if (released_vertex_count.load(std::memory_order_relaxed) == 0) return false;
   std::uint32_t first, count;

@@ -202,12 +202,20 @@ OpStatus Triangulation::Impl::remove_3d(OpContext& ctx, VertexId v) {
     sew_link_triangulation(ctx, v);
   }
 
+  // v's slot and the next walk start at a finite vertex of its link.
+  VertexId heir = ctx.link.front();
+  for (VertexId w : ctx.link)
+    if (w != 0) {
+      heir = w;
+      break;
+    }
   if (grid.slot_count) {
     std::size_t slot = grid.slot_of(pt(v));
-    if (grid.get(slot) == v) grid.set(slot, ctx.link.front());
+    if (grid.get(slot) == v) grid.set(slot, heir);
   }
   free_vertex(ctx, v);
-  ctx.last_vertex = ctx.link.front();
+  ctx.last_vertex = heir;
+  grid_note_removal(ctx);
   return OpStatus::done;
 }
 

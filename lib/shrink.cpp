@@ -11,10 +11,14 @@
 //             handle to it reads as dead and one to a cell that stayed still
 //             names it. The tags past the cut go too: tag_floor keeps the
 //             highest incarnation they held (pools.cpp, reserve_cells).
-//   vertices  ids never move (users hold them). Runs of at least
-//             min_released_run free ids give their records back (all-zero, as
-//             fresh memory) and wait in released_vertices; the other free ids
-//             make the free list again (a run too, if that list cannot grow:
+//   vertices  ids never move (users hold them). The free ids above the
+//             last live one are cut off the array (vertex_id_bound() drops;
+//             stamps come from a process-wide source, so a handle to an id
+//             handed out again still reads as dead). Runs of at least
+//             min_released_run free ids below it give their records back
+//             (all-zero, as fresh memory) and wait in released_vertices,
+//             which later scans over the ids skip; the other free ids make
+//             the free list again (a run too, if that list cannot grow:
 //             nothing here throws).
 //   grid      rebuilt for the vertices there are, if it was built for far more
 //             or has far more slots (an engine's); before the vertices go.
@@ -143,6 +147,10 @@ void Triangulation::Impl::shrink_to_fit() {
     if (end == v) {  // v is live
       ++v;
       continue;
+    }
+    if (end == n_ids) {  // the ids above the last live one go altogether: vertex_id_bound() drops
+      verts.truncate(v);
+      break;
     }
     bool listed = false;
     if (end - v >= min_released_run) {

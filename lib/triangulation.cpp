@@ -282,8 +282,10 @@ std::vector<VertexId> Triangulation::vertices() const {
   const Impl& m = *impl_;
   std::vector<VertexId> out;
   out.reserve(static_cast<std::size_t>(m.n_vertices.load()));
-  for (VertexId v = 1; v < m.verts.size(); ++v)
-    if (m.verts[v].multiplicity > 0) out.push_back(v);
+  detail::for_each_kept(1, m.verts.size(), m.released_ranges(), [&](std::size_t from, std::size_t to) {
+    for (std::size_t v = from; v < to; ++v)
+      if (m.verts[v].multiplicity > 0) out.push_back(static_cast<VertexId>(v));
+  });
   return out;
 }
 

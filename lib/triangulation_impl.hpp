@@ -156,7 +156,7 @@ struct Triangulation::Impl {
   // more than it allocates gives segments here, one short of ids takes them
   // before carving new storage, so the storage follows the live mesh however
   // the work moves between the engine's workers.
-  std::mutex spare_mutex;
+  mutable std::mutex spare_mutex;  // mutable: const scans read released_vertices under it
   // Some cell id has reached retire_at (then reserve_cells looks for
   // such ids in the ranges it carves; clear() and shrink_to_fit() keep
   // incarnations counting, above tag_floor for the tags they give back).
@@ -166,11 +166,25 @@ struct Triangulation::Impl {
   // on no free list): taken as fresh ranges, vertex_chunk ids at a time,
   // before the array grows. Under spare_mutex; released_vertex_count is its
   // total, read without the mutex to skip it when there is none.
+  // Invariant (validate checks all but the records, which it does not read):
+  // the runs are non-empty, disjoint, inside [1, verts.size()), their ids
+  // free (multiplicity 0, records all-zero, on no free list); the counts sum
+  // to released_vertex_count.
   struct IdRun {
     std::uint32_t first, count;
   };
   std::vector<IdRun> released_vertices;
   std::atomic<std::size_t> released_vertex_count{0};
+  // released_vertices as a skip list for scans over the vertex ids
+  // (id_ranges.hpp: sorted, disjoint); empty when there is none. Scans
+  // read each live vertex's record through it, never a released one's.
+  std::vector<detail::IdRange> released_ranges() const;
+  // The vertex ids handed out so far, released ones left out: what the
+  // engine sizes its jump grid by (after shrink_to_fit the id bound can be
+  // far above the mesh).
+  std::size_t vertex_ids_in_use() const {
+    return verts.size() - released_vertex_count.load(std::memory_order_relaxed);
+  }
   // Cell ids below tag_floor_end whose tags were given back (shrink_to_fit,
   // clear()) held incarnations up to tag_floor: reserve_cells starts such an
   // id there, so that its next cell is a newer incarnation than any handle to
@@ -365,6 +379,7 @@ struct Triangulation::Impl {
     return detail::box_side_of_sphere(pt(cr.v[0]), pt(cr.v[1]), pt(cr.v[2]), pt(cr.v[3]), p, eps.insphere);
   }
   void grid_note(OpContext& ctx, VertexId v);  // v was just inserted
+  void grid_note_removal(OpContext& ctx);      // a vertex was just removed
   // parallel: an engine's equal slots, built in the current TBB arena (with the world stopped).
   // most: an engine's cap; follow: an engine's tree whatever the crowding.
   void grid_rebuild(std::size_t slots = 0, bool parallel = false, std::size_t most = 0, bool follow = false);

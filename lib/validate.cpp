@@ -31,8 +31,23 @@ bool Triangulation::Impl::validate(std::string* why) const {
   if (!filter.check()) return fail(f << "the predicate filter's epsilons do not match its box");
   // Vertices (I4) and counts.
   std::size_t live_vertices = 0;
-  for (VertexId v = 1; v < verts.size(); ++v) {
-    if (verts[v].multiplicity == 0) continue;
+  const std::vector<detail::IdRange> released = released_ranges();  // all-zero records: not read
+  for (std::size_t i = 0; i < released.size(); ++i) {
+    const detail::IdRange r = released[i];
+    if (r.first == 0 || r.first >= r.end || r.end > verts.size() || (i > 0 && released[i - 1].end > r.first))
+      return fail(f << "released vertex ids [" << r.first << ", " << r.end << ") overlap or leave the ids");
+  }
+  std::size_t released_count = 0;
+  for (const detail::IdRange r : released) released_count += r.end - r.first;
+  if (released_count != released_vertex_count.load(std::memory_order_relaxed))
+    return fail(f << "released vertex ids number " << released_count << ", their count says "
+                  << released_vertex_count.load(std::memory_order_relaxed));
+  std::vector<VertexId> live_ids;
+  detail::for_each_kept(1, verts.size(), released, [&](std::size_t from, std::size_t to) {
+    for (std::size_t v = from; v < to; ++v)
+      if (verts[v].multiplicity > 0) live_ids.push_back(static_cast<VertexId>(v));
+  });
+  for (VertexId v : live_ids) {
     ++live_vertices;
     const KPoint& p = verts[v].p;
     if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z()))

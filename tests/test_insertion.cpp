@@ -860,6 +860,65 @@ TEST_CASE("the kernel's jump grid follows a region filled after its build", "[in
   require_same_as_cgal(t, pts);
 }
 
+TEST_CASE("walks stay short after most vertices are removed, in the kernel and in an engine", "[insert][locate][remove]") {
+  // A refiner's coarsening: 60k vertices removed down to 600, then 10k
+  // inserted. A removed vertex's slot takes a link vertex, but slots that
+  // had taken it from earlier removals kept naming it: most slots came to
+  // name dead vertices and walks started far away (48 steps an insertion
+  // instead of 6). The grid is rebuilt once a quarter of the vertices it was
+  // built for remain (the kernel at its removals, an engine's workers as
+  // they go), and an engine does not take over a grid built for far more.
+  const std::vector<Point3> pts = generated_points(pdt::Distribution::uniform, 60000, 31);
+  const std::vector<Point3> more = generated_points(pdt::Distribution::uniform, 10000, 32);
+  std::vector<Point3> expected(pts.begin(), pts.begin() + 600);
+  expected.insert(expected.end(), more.begin(), more.end());
+  auto steps_per_insertion = [](const pdt::TriangulationStats& before, const pdt::TriangulationStats& after) {
+    return static_cast<double>(after.walk_steps - before.walk_steps) /
+           static_cast<double>(after.insertions - before.insertions);
+  };
+  SECTION("the kernel") {
+    pdt::Triangulation t;
+    std::vector<pdt::VertexId> ids;
+    for (const Point3& p : pts) ids.push_back(t.insert(p).vertex);
+    for (std::size_t i = ids.size(); i-- > 600;) t.remove(ids[i]);
+    const pdt::TriangulationStats before = t.stats();
+    for (const Point3& p : more) (void)t.insert(p);
+    const double steps = steps_per_insertion(before, t.stats());
+    INFO("walk steps per insertion after the removals " << steps);
+    CHECK(steps < 12);
+    require_valid(t);
+    require_same_as_cgal(t, expected);
+  }
+  SECTION("an engine, on a grid the kernel built for all the points") {
+    pdt::Triangulation t;
+    const std::vector<pdt::InsertResult> in = t.insert_batch(pts);
+    tbb::task_arena arena(2);
+    arena.execute([&] {
+      pdt::EngineOptions opts;
+      opts.workers = 2;
+      {
+        pdt::Engine e(t, pdt::Box{{0, 0, 0}, {1, 1, 1}}, opts);
+        for (std::size_t i = 600; i < in.size(); ++i) e.remove(in[i].handle(), {});
+        e.drain();
+        // The workers rebuilt it as the vertices went (built for 60k before).
+        INFO("grid built for " << pdt::detail::impl_of(t).grid.built_for);
+        CHECK(pdt::detail::impl_of(t).grid.built_for < 15000);
+      }
+      const pdt::TriangulationStats before = t.stats();
+      {
+        pdt::Engine e(t, pdt::Box{{0, 0, 0}, {1, 1, 1}}, opts);
+        for (const Point3& p : more) e.insert(p, {});
+        e.drain();
+      }
+      const double steps = steps_per_insertion(before, t.stats());
+      INFO("walk steps per insertion after the removals " << steps);
+      CHECK(steps < 12);
+    });
+    require_valid(t);
+    require_same_as_cgal(t, expected);
+  }
+}
+
 TEST_CASE("an engine's jump grid follows a cluster far smaller than the box", "[insert][locate]") {
   // Half the points uniform in the unit cube, half in a cube of side 1e-4:
   // equal slots would hold the cluster in one slot, and a walk from there

@@ -14,6 +14,8 @@
 
 #include "common/cgal_reference.hpp"
 #include "common/engine_run.hpp"
+#include "id_ranges.hpp"
+#include "triangulation_impl.hpp"
 #include "pdt/engine.hpp"
 #include "pdt/error.hpp"
 #include "pdt/triangulation.hpp"
@@ -81,13 +83,15 @@ TEST_CASE("shrink_to_fit gives back the storage of removed vertices and keeps th
   const std::set<Quad> cells_before = cell_set(t);
   const auto handles_before = all_handles(t);
   const pdt::VertexId id_bound = t.vertex_id_bound();
+  const std::vector<pdt::VertexId> live_before = t.vertices();
 
   t.shrink_to_fit();
 
   require_valid(t);
   CHECK(cell_set(t) == cells_before);  // same cells, by the same vertex ids
   CHECK(t.cell_id_bound() == t.number_of_cells());  // the live cells fill the ids below the bound
-  CHECK(t.vertex_id_bound() == id_bound);
+  CHECK(t.vertex_id_bound() == live_before.back() + 1);  // the free ids above the last live one go
+  CHECK(t.vertices() == live_before);
   INFO("memory_bytes " << bytes_before << " before, " << t.memory_bytes() << " after");
   CHECK(t.memory_bytes() * 10 < bytes_before);
   for (std::size_t i = 0; i < pts.size(); ++i) {
@@ -117,7 +121,7 @@ TEST_CASE("shrink_to_fit gives back the storage of removed vertices and keeps th
     if (!keep[i]) t.insert(pts[i]);
   require_valid(t);
   require_same_as_cgal(t, pts);
-  CHECK(t.vertex_id_bound() == id_bound);
+  CHECK(t.vertex_id_bound() <= id_bound);
   // A moved cell's id that lives again is a newer incarnation than any it had
   // (the id's tag went back to the OS with its record).
   std::size_t moved_ids_back = 0;
@@ -255,4 +259,81 @@ TEST_CASE("an engine after shrink_to_fit reuses what was given back and equals C
   require_same_as_cgal(t, expected);
   // The engine's vertices went into the ids given back before any new one.
   CHECK(t.vertex_id_bound() <= id_bound + 4096);
+}
+
+TEST_CASE("for_each_kept gives the ranges a skip list leaves", "[shrink]") {
+  using pdt::detail::IdRange;
+  auto kept = [](std::size_t begin, std::size_t end, std::vector<IdRange> skip) {
+    std::vector<std::pair<std::size_t, std::size_t>> out;
+    pdt::detail::for_each_kept(begin, end, skip, [&](std::size_t b, std::size_t e) { out.emplace_back(b, e); });
+    return out;
+  };
+  using R = std::vector<std::pair<std::size_t, std::size_t>>;
+  CHECK(kept(1, 10, {}) == R{{1, 10}});
+  CHECK(kept(1, 10, {{3, 5}, {7, 8}}) == R{{1, 3}, {5, 7}, {8, 10}});
+  CHECK(kept(1, 10, {{1, 4}, {8, 12}}) == R{{4, 8}});
+  CHECK(kept(4, 6, {{1, 5}, {5, 6}}) == R{});
+  CHECK(kept(5, 9, {{1, 3}, {10, 12}}) == R{{5, 9}});
+  CHECK(kept(2, 9, {{1, 3}, {4, 5}, {6, 20}}) == R{{3, 4}, {5, 6}});
+  CHECK(kept(3, 3, {{1, 2}}) == R{});
+}
+
+TEST_CASE("after shrink_to_fit the id bound follows the last live vertex and scans skip the ids given back",
+          "[shrink]") {
+  const std::vector<Point3> pts = random_points(scaled(30000, 8000), 77);
+  pdt::Triangulation t;
+  const std::vector<pdt::InsertResult> in = t.insert_batch(pts);
+  std::vector<pdt::VertexHandle> handles;
+  for (const auto& r : in) handles.push_back(r.handle());
+  // The later two thirds by id go (the bound drops past the last live
+  // vertex), and of the rest all but every 600th (runs given back below it).
+  pdt::VertexId top = 0;
+  for (const auto& r : in) top = std::max(top, r.vertex);
+  const pdt::VertexId cut = top / 3;
+  std::vector<Point3> expected;
+  pdt::VertexId last_live = 0;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const pdt::VertexId v = in[i].vertex;
+    if (v < cut && v % 600 == 0) {
+      expected.push_back(pts[i]);
+      last_live = std::max(last_live, v);
+    } else {
+      t.remove(v);
+    }
+  }
+  t.shrink_to_fit();
+  CHECK(t.vertex_id_bound() == last_live + 1);
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+
+  // Scans do not read the records given back: one is made to look live,
+  // and no scan finds it (validate, vertices(), the jump grid's rebuilds
+  // as the mesh grows again).
+  auto& m = pdt::detail::impl_of(t);
+  const std::vector<pdt::detail::IdRange> released = m.released_ranges();
+  REQUIRE(!released.empty());
+  const pdt::VertexId decoy = released.front().first + 1;
+  m.verts[decoy].multiplicity = 1;
+  m.verts[decoy].p = pdt::detail::KPoint(0.5, 0.5, 0.5);
+  const std::vector<pdt::VertexId> ids = t.vertices();
+  CHECK(std::find(ids.begin(), ids.end(), decoy) == ids.end());
+  CHECK(ids.size() == expected.size());
+  require_valid(t);
+  const pdt::detail::JumpGrid grid = pdt::detail::JumpGrid::build(m.verts, 0, released);
+  CHECK(grid.built_for == expected.size());
+  m.verts[decoy].multiplicity = 0;  // all-zero again, as released records are
+  m.verts[decoy].p = pdt::detail::KPoint(0, 0, 0);
+
+  // Growing again: ids come from the released runs first, then past the
+  // bound; handles to the ids above the old bound stay dead when those ids
+  // are handed out again.
+  const std::vector<Point3> more = random_points(scaled(40000, 10000), 78);
+  for (const Point3& p : more) (void)t.insert(p);
+  expected.insert(expected.end(), more.begin(), more.end());
+  require_valid(t);
+  require_same_as_cgal(t, expected);
+  for (std::size_t i = 0; i < in.size(); ++i)
+    if (in[i].vertex >= cut || in[i].vertex % 600 != 0) CHECK_FALSE(t.is_vertex(handles[i]));
+  CHECK(m.released_ranges().empty());
+  CHECK(t.vertices().size() == expected.size());
 }

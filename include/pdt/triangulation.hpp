@@ -157,8 +157,12 @@ class Triangulation {
   // largest mesh held so far: 1M vertices removed down to the last 10k
   // inserted keep about 290 MB until this call, then about 3 MB. Vertex ids
   // never move, so a page of vertex records that still holds a live one
-  // stays: the same 1M down to 10k chosen at random keep about 38 MB. Time
-  // and memory traffic in proportion to that largest size. The triangulation is the same; every
+  // stays: the same 1M down to 10k chosen at random keep about 38 MB. The
+  // free ids above the highest live one go altogether (vertex_id_bound()
+  // drops); those below it that were given back are skipped by later scans
+  // (vertices(), validate(), the writers, the jump grid's rebuilds), whose
+  // time then follows the mesh held. This call's own time and memory traffic
+  // are in proportion to the largest size. The triangulation is the same; every
   // VertexId and VertexHandle stays valid; live cells may move to lower ids,
   // and a CellHandle to a moved cell reads as dead afterwards (one to a cell
   // that stayed still names it). Not a change: the change hook is not called.
@@ -203,6 +207,7 @@ class Triangulation {
   bool is_finite_cell(CellId c) const;
   VertexId cell_vertex(CellId c, int i) const;
   CellId cell_neighbor(CellId c, int i) const;
+  // Every live vertex id is below it (shrink_to_fit may lower it).
   VertexId vertex_id_bound() const;
   CellHandle cell_handle(CellId c) const;          // pdt::Error (invalid_argument) unless is_cell(c)
   // The cell of h if that incarnation is still live; nothing if it died.

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -358,9 +359,15 @@ OpStream generate(const GenerateOptions& o) {
     default: throw Error(ErrorCode::invalid_argument, "generate: unknown distribution");
   }
 
-  // The first m insertions get undone.
-  auto m = static_cast<std::uint64_t>(std::floor(o.remove_fraction * static_cast<double>(n)));
-  m = std::min(m, n);
+  // The first m insertions get undone: floor(F * n) for F as written in
+  // decimal. The double nearest 0.29 is a little below it, and 0.29 * 100
+  // comes out as 28.999999999999996; a product within a few rounding errors
+  // below an integer is that integer (parsing F and the product are each
+  // within half an ulp).
+  const double wanted = o.remove_fraction * static_cast<double>(n);
+  double whole = std::floor(wanted);
+  if (whole + 1 - wanted <= 4 * std::numeric_limits<double>::epsilon() * wanted) whole += 1;
+  const std::uint64_t m = std::min(static_cast<std::uint64_t>(whole), n);
 
   OpStream st;
   st.box = box;

@@ -415,6 +415,31 @@ void write_tetgen(const std::string& path, const Triangulation& t) {
       });
 }
 
+namespace {
+// A quadratic (second-order) mesh's nodes that are only edge nodes (its
+// tets' nodes 5 to 10, at or near the edges' midpoints) are not vertices of
+// the tetrahedralization its corners make: they leave m.points, which keeps
+// the corners (and any node no tet uses, which check_mesh then reports), in
+// their order.
+void drop_edge_nodes(Mesh& m, const std::vector<std::uint32_t>& edge_nodes) {
+  if (edge_nodes.empty()) return;
+  constexpr std::uint8_t corner = 1, edge = 2;
+  std::vector<std::uint8_t> role(m.points.size(), 0);
+  for (const auto& t : m.tets)
+    for (std::uint32_t v : t) role[v] |= corner;
+  for (std::uint32_t v : edge_nodes) role[v] |= edge;
+  std::vector<std::uint32_t> renumbered(m.points.size());
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < m.points.size(); ++i) {
+    renumbered[i] = static_cast<std::uint32_t>(kept);
+    if (role[i] != edge) m.points[kept++] = m.points[i];
+  }
+  m.points.resize(kept);
+  for (auto& t : m.tets)
+    for (std::uint32_t& v : t) v = renumbered[v];
+}
+}  // namespace
+
 Mesh read_tetgen(const std::string& path) {
   const TetgenFiles files = tetgen_files(path);
   Mesh m;
@@ -452,6 +477,7 @@ Mesh read_tetgen(const std::string& path) {
   // Every line: its index (the first numbered 0 or 1, then consecutive),
   // the nodes, the attributes; nothing more, nothing less.
   const std::uint64_t fields_per_line = 1 + per + attributes;
+  std::vector<std::uint32_t> edge_nodes;  // quadratic tets' (per == 10)
   std::uint64_t first_index = 0;
   m.tets.reserve(static_cast<std::size_t>(std::min<std::uint64_t>(count, 1u << 22)));
   for (std::uint64_t i = 0; i < count; ++i) {
@@ -467,16 +493,20 @@ Mesh read_tetgen(const std::string& path) {
       f.fail("tetrahedron index " + std::to_string(index) + "; expected " + std::to_string(first_index + i) +
              " (consecutive)");
     std::array<std::uint32_t, 4> t{};
-    for (int k = 0; k < 4; ++k) {  // the 4 corners; quadratic tets' edge nodes are ignored
+    for (std::uint64_t k = 0; k < per; ++k) {  // the 4 corners, then a quadratic tet's 6 edge nodes
       const std::uint64_t v = count_field(fields[1 + k], "node index");
       if (v < first || v - first >= m.points.size())
         f.fail("node index " + std::to_string(v) + " is not one of the " + std::to_string(m.points.size()) +
                " nodes (numbered from " + std::to_string(first) + ")");
-      t[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(v - first);
+      if (k < 4)
+        t[static_cast<std::size_t>(k)] = static_cast<std::uint32_t>(v - first);
+      else
+        edge_nodes.push_back(static_cast<std::uint32_t>(v - first));
     }
     m.tets.push_back(t);
   }
   detail::require_end(f, "the " + std::to_string(count) + " tetrahedra its header announces");
+  drop_edge_nodes(m, edge_nodes);
   return m;
 }
 

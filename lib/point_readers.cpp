@@ -157,6 +157,20 @@ std::size_t ply_size(PlyType t) {
 }
 
 // The value of a binary PLY scalar, exactly as a double.
+// For an integer type: its range (true), else false (a float type takes any
+// value a double holds).
+bool ply_integer_range(PlyType t, double& lo, double& hi, const char*& name) {
+  switch (t) {
+    case PlyType::i8: lo = -128, hi = 127, name = "a char (int8)"; return true;
+    case PlyType::u8: lo = 0, hi = 255, name = "a uchar (uint8)"; return true;
+    case PlyType::i16: lo = -32768, hi = 32767, name = "a short (int16)"; return true;
+    case PlyType::u16: lo = 0, hi = 65535, name = "a ushort (uint16)"; return true;
+    case PlyType::i32: lo = -2147483648.0, hi = 2147483647.0, name = "an int (int32)"; return true;
+    case PlyType::u32: lo = 0, hi = 4294967295.0, name = "a uint (uint32)"; return true;
+    default: return false;
+  }
+}
+
 double ply_value(PlyType t, const unsigned char* p, bool big_endian) {
   unsigned char b[8];
   const std::size_t n = ply_size(t);
@@ -361,6 +375,15 @@ std::vector<Point3> read_ply(InputFile& f) {
             NumStatus s = parse_double(tok[t], c[which]);
             if (s != NumStatus::ok)
               f.fail("vertex " + std::to_string(k) + " coordinate " + quote(tok[t]) + " " + describe(s));
+            // An integer property holds integers of its type's range (a
+            // binary file cannot hold any other; text must not either).
+            double lo = 0, hi = 0;
+            const char* type_name = "";
+            if (ply_integer_range(p.type, lo, hi, type_name) &&
+                (c[which] != std::floor(c[which]) || c[which] < lo || c[which] > hi))
+              f.fail("vertex " + std::to_string(k) + " coordinate " + quote(tok[t]) + " is not a value of its type: '" +
+                     p.name + "' is " + type_name + ", an integer from " + std::to_string(static_cast<long long>(lo)) +
+                     " to " + std::to_string(static_cast<long long>(hi)) + " (declare it float or double)");
           }
           ++t;
         }

@@ -2,6 +2,7 @@
 // The `pdt` command-line tool, run as a separate process: exit codes, and
 // error messages naming file and line on stderr, for bad inputs and usage.
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <catch2/catch.hpp>
 #include <cstdlib>
@@ -111,8 +112,10 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
          "--trace tr.xyz: pdt run reads a file of that extension as a point set"},
         {"gen --points 10 --out g.node", "--out g.node: pdt run reads a file of that extension as a point set"},
         {"refine --domain sphere --size 0.5 --out same.vtu --trace same.vtu",
-         "--trace same.vtu and --out same.vtu both write same.vtu"},
-        {"refine --domain sphere --size 0.5 --out m.node --trace m.ele", "--trace m.ele and --out m.node both write m.ele"},
+         "--trace same.vtu: a .vtu name is for a mesh, and this writes an operation stream; name it FILE.ops"},
+        {"refine --domain sphere --size 0.5 --out m.node --trace m.ele",
+         "--trace m.ele: a .ele name is for a mesh, and this writes an operation stream"},
+        {"gen --points 10 --out g.VTU", "--out g.VTU: a .vtu name is for a mesh"},
         {"run m.node --out m.node", "--out m.node would overwrite the input m.node"},
         {"gen --points 1e17 --out x.ops", "--points '1e17': too large (at most 4286578688)"},
         {"gen --points 1e12 --out x.ops", "--points '1e12': too large (at most 4286578688)"},
@@ -128,6 +131,18 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
       CHECK(r.code == 2);
       CHECK(r.err.rfind(std::string("pdt: ") + why, 0) == 0);
       CHECK(r.err.find("usage: pdt") != std::string::npos);
+    }
+  }
+  SECTION("gen refuses a stream larger than the machine's memory before making it") {
+    // The most points gen takes: 64 bytes each in memory, some 274 GB.
+    const double memory = static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGE_SIZE));
+    if (memory < 2.5e11) {
+      const Result r = run_pdt(d, "gen --points 4286578688 --out '" + d.file("huge.ops") + "'");
+      CHECK(r.code == 2);
+      CHECK(r.err.find("--points 4,286,578,688: gen makes the whole stream in memory before writing it") !=
+            std::string::npos);
+      CHECK(r.err.find("give fewer points") != std::string::npos);
+      CHECK_FALSE(std::filesystem::exists(d.file("huge.ops")));
     }
   }
   SECTION("an output directory that is not there is refused before the run") {
@@ -232,6 +247,19 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK(r.code == 2);
     CHECK(r.out.empty());
     CHECK(r.err.find("cannot write in") != std::string::npos);
+    // A loop of links: refused before the run (nothing printed but why).
+    std::filesystem::create_symlink("loop.vtu", d.file("loop.vtu"));
+    std::filesystem::create_symlink("loop2.ops", d.file("loop1.ops"));
+    std::filesystem::create_symlink("loop1.ops", d.file("loop2.ops"));
+    for (const std::string& cmd : {"run '" + ops + "' --out '" + d.file("loop.vtu") + "'",
+                                   "gen --points 10 --out '" + d.file("loop1.ops") + "'",
+                                   "refine --domain sphere --size 0.5 --out '" + d.file("loop.vtu") + "'"}) {
+      INFO(cmd);
+      r = run_pdt(d, cmd);
+      CHECK(r.code == 2);
+      CHECK(r.out.empty());
+      CHECK(r.err.find("Too many levels of symbolic links") != std::string::npos);
+    }
     // A link to a file not there yet: made where the link points, whole.
     std::filesystem::create_symlink("target.vtu", d.file("link.vtu"));
     r = run_pdt(d, "run '" + ops + "' --out '" + d.file("link.vtu") + "'");
@@ -370,9 +398,11 @@ TEST_CASE("pdt reports missing files and bad usage, exit 2", "[cli]") {
     CHECK(r.code == 2);
     CHECK(r.err.find("give the trace a name of its own") != std::string::npos);
     // One file under two names, neither there yet, one of them bare (run in
-    // d): refused before the run, nothing written.
-    for (const char* names : {"--out b.vtu --trace ./b.vtu", "--out ./b.vtu --trace b.vtu",
-                              "--out b.node --trace ./b.ele"}) {
+    // d), the trace's through a link: refused before the run, nothing written.
+    std::filesystem::create_symlink("b.vtu", d.file("lb.ops"));
+    std::filesystem::create_symlink("b.ele", d.file("le.ops"));
+    for (const char* names : {"--out b.vtu --trace ./lb.ops", "--out ./b.vtu --trace lb.ops",
+                              "--out b.node --trace ./le.ops"}) {
       INFO(names);
       CHECK(status_of("cd '" + d.path().string() + "' && " + tool + "refine --domain sphere --size 0.3 " + names +
                       " >/dev/null 2>'" + err + "'") == 2);

@@ -206,6 +206,13 @@ TEST_CASE("removal after the insertions: the first floor(F*N), in order", "[gen]
   CHECK(gen(pdt::Distribution::uniform, 10, 2, 1.0).remove_count() == 10);
   CHECK(gen(pdt::Distribution::uniform, 10, 2, 0.0).remove_count() == 0);
   CHECK(gen(pdt::Distribution::uniform, 10, 2, 0.19).remove_count() == 1);
+  // F as written in decimal: the doubles nearest 0.29 and 0.57 are a little
+  // below them, and their products with 100 a little below 29 and 57.
+  CHECK(gen(pdt::Distribution::uniform, 100, 2, 0.29).remove_count() == 29);
+  CHECK(gen(pdt::Distribution::uniform, 100, 2, 0.57).remove_count() == 57);
+  CHECK(gen(pdt::Distribution::uniform, 100, 2, 0.58).remove_count() == 58);
+  CHECK(gen(pdt::Distribution::uniform, 100, 2, 0.289).remove_count() == 28);
+  CHECK(gen(pdt::Distribution::uniform, 3, 2, 0.9999).remove_count() == 2);
 }
 
 TEST_CASE("interleaved removal: each right after an insertion following its own", "[gen]") {

@@ -10,6 +10,8 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <map>
+#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -273,6 +275,23 @@ TEST_CASE("ply ascii: vertex element after others, list properties skipped", "[i
                       count + " 1 2\n");
     expect_bad_points(p, p + ":9:", "its list 'tag' announces");
   }
+  // An integer property holds integers of its type's range, as a binary
+  // file would: 0.25 for an int, -1 or 300 for a uchar are refused.
+  for (const auto& [type, value, what] :
+       {std::tuple{"int", "0.25", "'x' is an int (int32), an integer from -2147483648 to 2147483647"},
+        std::tuple{"uchar", "-1", "'x' is a uchar (uint8), an integer from 0 to 255"},
+        std::tuple{"uchar", "300", "'x' is a uchar (uint8)"}, std::tuple{"short", "1e9", "'x' is a short (int16)"}}) {
+    INFO(type << " " << value);
+    write_file(p, std::string("ply\nformat ascii 1.0\nelement vertex 1\nproperty ") + type +
+                      " x\nproperty float y\nproperty float z\nend_header\n" + value + " 2 3\n");
+    expect_bad_points(p, p + ":", what);
+  }
+  write_file(p, "ply\nformat ascii 1.0\nelement vertex 2\nproperty uchar x\nproperty int y\nproperty uint z\n"
+                "end_header\n255 -2147483648 4294967295\n0 7.0 1e3\n");
+  const auto ints = pdt::read_points(p);
+  REQUIRE(ints.size() == 2);
+  CHECK(ints[0] == pdt::Point3{255, -2147483648.0, 4294967295.0});
+  CHECK(ints[1] == pdt::Point3{0, 7, 1000});
   // Two properties of one name: which one is x?
   write_file(p, "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nproperty float y\n"
                 "property float z\nend_header\n1 2 3 4\n");
@@ -455,6 +474,70 @@ TEST_CASE("off, node and smesh", "[io]") {
 }
 
 // ---- writers and reader ------------------------------------------------------------
+
+TEST_CASE("read_tetgen keeps a quadratic mesh's corners, and check_mesh checks them", "[io]") {
+  // TetGen's -o2: 10 nodes a tetrahedron, the corners then the 6 edge nodes
+  // (appended after the corners in the .node file, here some before them).
+  TempDir d;
+  const std::vector<pdt::Point3> corners = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 1, 1}};
+  std::vector<pdt::Point3> nodes;
+  std::vector<int> corner_node(corners.size());
+  auto mid = [&](int a, int b) {
+    return pdt::Point3{(corners[a].x + corners[b].x) / 2, (corners[a].y + corners[b].y) / 2,
+                       (corners[a].z + corners[b].z) / 2};
+  };
+  nodes.push_back(mid(0, 1));  // an edge node first
+  for (std::size_t i = 0; i < corners.size(); ++i) {
+    corner_node[i] = static_cast<int>(nodes.size());
+    nodes.push_back(corners[i]);
+  }
+  // Two tets sharing the facet 1 2 3 (the hull of the 5 corners, Delaunay).
+  const int tets[2][4] = {{0, 1, 2, 3}, {4, 2, 1, 3}};
+  std::string ele = "2 10 0\n";
+  std::map<std::pair<int, int>, int> edge_node{{{0, 1}, 0}};
+  for (int t = 0; t < 2; ++t) {
+    ele += std::to_string(t);
+    for (int k = 0; k < 4; ++k) (ele += ' ') += std::to_string(corner_node[tets[t][k]]);
+    const int e[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+    for (const auto& ab : e) {
+      const std::pair<int, int> key = std::minmax(tets[t][ab[0]], tets[t][ab[1]]);
+      auto [it, added] = edge_node.emplace(key, static_cast<int>(nodes.size()));
+      if (added) nodes.push_back(mid(key.first, key.second));
+      (ele += ' ') += std::to_string(it->second);
+    }
+    ele += "\n";
+  }
+  std::string node = std::to_string(nodes.size()) + " 3 0 0\n";
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    std::ostringstream line;
+    line.precision(17);
+    line << i << " " << nodes[i].x << " " << nodes[i].y << " " << nodes[i].z << "\n";
+    node += line.str();
+  }
+  write_file(d.file("q.node"), node);
+  write_file(d.file("q.ele"), ele);
+  const pdt::Mesh m = pdt::read_tetgen(d.file("q.node"));
+  REQUIRE(m.points.size() == corners.size());
+  for (std::size_t i = 0; i < corners.size(); ++i) CHECK(m.points[i] == corners[i]);
+  REQUIRE(m.tets.size() == 2);
+  CHECK(m.tets[0] == std::array<std::uint32_t, 4>{0, 1, 2, 3});
+  CHECK(m.tets[1] == std::array<std::uint32_t, 4>{4, 2, 1, 3});
+  const pdt::MeshCheck c = pdt::check_mesh(m);
+  INFO(c.message);
+  CHECK(c.valid);
+  // A node no tetrahedron uses stays, and check_mesh says so.
+  const std::string more_nodes =
+      std::to_string(nodes.size() + 1) + node.substr(node.find(' ')) + std::to_string(nodes.size()) + " 5 5 5\n";
+  write_file(d.file("q.node"), more_nodes);
+  const pdt::Mesh stray = pdt::read_tetgen(d.file("q.node"));
+  CHECK(stray.points.size() == corners.size() + 1);
+  CHECK_FALSE(pdt::check_mesh(stray).valid);
+  // An edge node past the nodes is refused, naming it.
+  write_file(d.file("q.ele"), "1 10 0\n0 1 2 3 4 5 6 7 8 9 99\n");
+  const auto e = catch_error([&] { pdt::read_tetgen(d.file("q.node")); });
+  REQUIRE(e.has_value());
+  CHECK(std::string(e->what()).find("node index 99 is not one of") != std::string::npos);
+}
 
 TEST_CASE("write_tetgen / read_tetgen round trip, with TetGen's headers", "[io]") {
   TempDir d;

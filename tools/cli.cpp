@@ -69,6 +69,12 @@ std::string dangling_link_target(const std::string& path) {
 void require_writable_file(const char* option, const std::string& path) {
   struct stat st;
   const bool exists = ::stat(path.c_str(), &st) == 0;
+  // A name that cannot be looked up for another reason than a missing file
+  // or folder (a loop of symbolic links, a name too long) fails the same way
+  // when the output is opened: refused now, before the run.
+  if (const int err = exists ? 0 : errno; err != 0 && err != ENOENT && err != ENOTDIR)
+    throw pdt::Error(pdt::ErrorCode::io_failure,
+                     std::string(option) + ": cannot write '" + path + "': " + std::strerror(err));
   if (exists) {
     if (S_ISDIR(st.st_mode))
       throw pdt::Error(pdt::ErrorCode::io_failure,
@@ -118,6 +124,11 @@ void require_stream_output_name(const char* usage, const char* option, const std
     usage_error(usage, std::string(option) + " " + path +
                            ": pdt run reads a file of that extension as a point set, not as an operation stream; "
                            "name it FILE.ops (text) or FILE.opsb (binary)");
+  for (const char* mesh_ext : {".vtu", ".ele"})
+    if (pdt::support::ends_with_nocase(path, mesh_ext))
+      usage_error(usage, std::string(option) + " " + path + ": a " + mesh_ext +
+                             " name is for a mesh, and this writes an operation stream; name it FILE.ops (text) or "
+                             "FILE.opsb (binary)");
   require_writable_file(option, path);
   // pdt gen --out /dev/stdout > FILE: the stream goes to standard output, the
   // summary to standard error, so that FILE holds the stream alone.

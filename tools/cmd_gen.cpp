@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 // pdt gen: writes a synthetic operation stream.
+#include <unistd.h>
+
 #include <cstdio>
+#include <new>
 #include <optional>
 #include <string>
 
@@ -64,8 +67,30 @@ int cmd_gen(Args args) {
   if (!have_points) usage_error(gen_usage, "gen needs --points N");
   if (!out || out->empty()) usage_error(gen_usage, "gen needs --out FILE");
   require_stream_output_name(gen_usage, "--out", *out);
+  // The stream is made in memory before it is written: the points, then the
+  // operations. More than the machine has is refused before it starts (else
+  // the system would stop it part way, or it would fail with no word of why).
+  const double ops = static_cast<double>(o.points) * (1 + o.remove_fraction);
+  const double need = static_cast<double>(o.points) * sizeof(pdt::Point3) + ops * sizeof(pdt::Operation);
+  const double have = static_cast<double>(::sysconf(_SC_PHYS_PAGES)) * static_cast<double>(::sysconf(_SC_PAGE_SIZE));
+  auto too_large = [&](const std::string& why) {
+    const double per_point = need / static_cast<double>(o.points);
+    throw pdt::Error(pdt::ErrorCode::invalid_argument,
+                     "--points " + format_count(o.points) + ": gen makes the whole stream in memory before writing it, " +
+                         pdt::support::format_megabytes(static_cast<std::uint64_t>(need)) + " for this one (" +
+                         std::to_string(static_cast<int>(per_point)) + " bytes a point), " + why +
+                         "; give fewer points (half this machine's memory holds about " +
+                         format_count(static_cast<std::uint64_t>(have / per_point / 2)) + ")");
+  };
+  if (have > 0 && need > have)
+    too_large("more than this machine's " + pdt::support::format_megabytes(static_cast<std::uint64_t>(have)));
   pdt::support::Stopwatch sw;
-  const pdt::OpStream s = pdt::generate(o);
+  pdt::OpStream s;
+  try {
+    s = pdt::generate(o);
+  } catch (const std::bad_alloc&) {
+    too_large("and it did not fit in the memory free");
+  }
   pdt::write_ops(*out, s);
   outputs_in_place(*out);
   std::fprintf(summary_stream(), "wrote %s: %s insertions, %s removals (%s, seed %llu), box %s, in %s\n", out->c_str(),

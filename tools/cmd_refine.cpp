@@ -189,7 +189,8 @@ int cmd_refine(Args args) {
   char buf[256];
   row("domain", o.domain.name + ", size " + pdt::support::format_double(o.size) + ", ratio " +
                     pdt::support::format_double(o.ratio));
-  row("threads", std::to_string(st.workers) + " workers (parallel engine, allocator " + pdt::allocator_name() + ")");
+  row("threads", std::to_string(st.workers) + (st.workers == 1 ? " worker" : " workers") +
+                     " (parallel engine, allocator " + pdt::allocator_name() + ")");
   row("vertices", format_count(t.number_of_vertices()));
   row("tets inside", format_count(q.inside) + " (of " + format_count(t.number_of_finite_cells()) + ")");
   row("insertions", format_count(st.insertions) + " (" + format_count(st.start_points) + " starting points: the box's corners and a lattice; " +

@@ -454,7 +454,7 @@ int cmd_run(Args args) {
 
   row("input", *input + (box ? ", box " + box_string(*box) : "") +
                    (points ? (in_order ? " (points in file order)" : " (points as a batch, spatial order)") : ""));
-  row("threads", st.engine ? std::to_string(st.workers) + " workers (parallel engine, " +
+  row("threads", st.engine ? std::to_string(st.workers) + (st.workers == 1 ? " worker" : " workers") + " (parallel engine, " +
                                  std::to_string(st.blocks_per_axis) + "^3 blocks, allocator " + pdt::allocator_name() +
                                  ")"
                            : std::string("1 (sequential kernel)"));

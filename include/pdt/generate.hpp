@@ -30,7 +30,8 @@ enum class Distribution {
              // than the domain, amid a uniform cloud
 };
 
-// The first floor(F * N) insertions (F = remove_fraction) are undone:
+// The first floor(F * N) insertions (F = remove_fraction, taken as the decimal
+// it was written as: 0.29 of 100 is 29) are undone:
 enum class RemovalOrder {
   after,       // paper §4.1: all insertions, then the removals, in insertion order
   interleaved  // a refiner's pattern: the removal of insertion k comes right after

@@ -61,7 +61,10 @@ void write_tetgen(const std::string& path, const Mesh& mesh);
 void write_tetgen(const std::string& path, const Triangulation& t);
 void write_vtu(const std::string& path, const Mesh& mesh, VtuEncoding encoding = VtuEncoding::zlib,
                std::span<const CellField> cell_fields = {});
-Mesh read_tetgen(const std::string& path);  // reads .node and the .ele beside it
+// Reads .node and the .ele beside it. Of a quadratic mesh (10 nodes a
+// tetrahedron) it keeps the corners: the nodes used only as edge nodes are
+// left out of points, the others keep their order.
+Mesh read_tetgen(const std::string& path);
 
 // The two files write_tetgen writes and read_tetgen reads for `path`: a path
 // ending in .node or .ele (any case) names one of them as it is, and the

@@ -30,7 +30,12 @@
 //    attached (a second is refused with pdt::Error), and the triangulation's
 //    mutators (insert, remove, clear, move, set_change_hook) are refused while
 //    it is attached. Engines may come and go on one triangulation, with
-//    sequential work in between; each leaves it valid.
+//    sequential work in between; each leaves it valid. An awaitable
+//    (engine.insert(p) and friends) names the engine that made it, as a
+//    reference does: await it while that engine lives. One awaited after
+//    the engine is destroyed is not detected (undefined behaviour, as for a
+//    dangling reference; an engine built since at the same address may even
+//    take it).
 //  - Threads. Any thread may submit at any time, including from callbacks,
 //    hooks and coroutines the engine resumed. Submitting never waits for the
 //    engine's workers (a submitter may hold a lock a hook also takes). drain(), stats() and

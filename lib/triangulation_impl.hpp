@@ -446,6 +446,9 @@ struct Triangulation::Impl {
   VertexId find_flat(const KPoint& p) const { return flat_index.find(p, verts); }
 
   bool validate(std::string* why) const;  // validate.cpp
+  // The distinct edges of the live cells (the infinite vertex's included),
+  // counted in passes of about pass_edges (validate.cpp).
+  std::size_t count_distinct_edges(std::size_t pass_edges = std::size_t{8} << 20) const;
 };
 
 namespace detail {

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 // validate(): true on good triangulations of every kind; false, with a
 // message, once the structure is deliberately corrupted through impl().
+#include <algorithm>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -82,6 +84,28 @@ TEST_CASE("validate accepts good triangulations", "[validate]") {
   const TetList before = canonical_tets(lat, surviving_points(lat));
   REQUIRE(lat.validate());
   REQUIRE((canonical_tets(lat, surviving_points(lat)) == before));
+}
+
+TEST_CASE("validate's edge count (Euler) is the same in one pass or many", "[validate]") {
+  // The distinct edges, counted in passes over ranges of their lower vertex
+  // id: any number of passes gives the count a set of all the edges gives,
+  // which for a triangulation of the sphere is V + C (with the infinite vertex).
+  pdt::Triangulation t = random_triangulation(3000, 11);
+  for (auto v : t.vertices())
+    if (v % 5 == 0) t.remove(v);  // free ids among the live ones
+  std::set<std::pair<pdt::VertexId, pdt::VertexId>> edges;
+  for (pdt::CellId c = 0; c < t.cell_id_bound(); ++c) {
+    if (!t.is_cell(c)) continue;
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) edges.insert(std::minmax(t.cell_vertex(c, i), t.cell_vertex(c, j)));
+  }
+  CHECK(edges.size() == t.number_of_vertices() + 1 + t.number_of_cells());
+  const auto& m = pdt::detail::impl_of(t);
+  for (std::size_t pass_edges : {std::size_t{1} << 30, std::size_t{5000}, std::size_t{977}}) {
+    INFO("about " << pass_edges << " edges a pass");
+    CHECK(m.count_distinct_edges(pass_edges) == edges.size());
+  }
+  require_valid(t);
 }
 
 TEST_CASE("validate detects a wrongly oriented cell", "[validate]") {

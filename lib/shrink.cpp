@@ -101,8 +101,9 @@ void Triangulation::Impl::shrink_to_fit() {
     }
 
   // -- jump grid --------------------------------------------------------------
-  // Before the vertices' records go: its build reads every one (a kernel
-  // without a shared zero page, as in some VMs, commits a page that is read).
+  // Before the vertices' records go: its build reads every id's record but
+  // those given back before (a kernel without a shared zero page, as in
+  // some VMs, commits a page that is read).
   const auto live = static_cast<std::size_t>(n_vertices.load(std::memory_order_relaxed));
   if (dim.load(std::memory_order_relaxed) == 3 && grid_growth == GridGrowth::kernel &&
       (grid.built_for > 2 * live + 64 || grid.slot_count > live + 64)) {  // the kernel's: about live / 2 slots
